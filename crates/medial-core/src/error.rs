@@ -1,0 +1,39 @@
+//! The one error type of the engine.
+
+/// Everything that can go wrong inside the engine. Messages say what and where, so that the
+/// command-line tool can print them as they are.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A triangle mesh is unusable: an index out of range, a degenerate or non-triangle cell,
+    /// an open or non-manifold or inconsistently oriented surface.
+    #[error("invalid mesh: {0}")]
+    InvalidMesh(String),
+    /// A medial template is inconsistent (medial indices, spokes, radii, medial points).
+    #[error("invalid medial template: {0}")]
+    InvalidTemplate(String),
+    /// A volume (image) is unusable: empty, degenerate affine, wrong voxel count.
+    #[error("invalid volume: {0}")]
+    InvalidVolume(String),
+    /// Two inputs that must agree in size do not.
+    #[error("{what}: expected {expected}, found {found}")]
+    ShapeMismatch {
+        /// What was being compared.
+        what: String,
+        /// The size that was required.
+        expected: usize,
+        /// The size that was given.
+        found: usize,
+    },
+    /// A NaN or infinite number where a finite one is required.
+    #[error("non-finite value: {0}")]
+    NonFinite(String),
+    /// A parameter outside its valid range.
+    #[error("invalid parameter: {0}")]
+    InvalidParameter(String),
+    /// The optimiser failed (not merely stopped early).
+    #[error("optimisation failed: {0}")]
+    Optimisation(String),
+}
+
+/// Result alias of the engine.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
