@@ -1,1 +1,163 @@
-//! (in progress)
+//! The augmented-Lagrangian schedule of one stage (SPEC §3).
+//!
+//! `λ = 0`, `μ = μ₀`; for each AL iteration: minimise `E_AL` over all controls (L-BFGS, warm
+//! started), then `λ^n_l ← λ^n_l − μ C_l(q^n)` at the optimum, then `μ ← μ·μ_factor` (always,
+//! or only when `max |C|` did not halve since the previous AL iteration). `μ` never exceeds
+//! [`AlSchedule::mu_max`], a guard against the divergence the reference implementation shows
+//! when `μ` runs away.
+
+use crate::attachment::Attachment;
+use crate::flow::Flow;
+use crate::objective::{ConstraintSet, Evaluation, Objective, Penalty};
+use crate::optimize::{minimize, IterationReport, LbfgsOptions, StopReason};
+use crate::{Error, Result, Vec3};
+
+/// When `μ` grows between AL iterations.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum MuUpdate {
+    /// After every AL iteration.
+    #[default]
+    Always,
+    /// Only when `max |C|` did not at least halve since the previous AL iteration (reference).
+    IfNotHalved,
+}
+
+/// The `μ` schedule.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AlSchedule {
+    /// Initial penalty weight `μ₀ > 0`.
+    pub mu: f64,
+    /// Growth factor `≥ 1`.
+    pub mu_factor: f64,
+    /// Upper bound of `μ`.
+    pub mu_max: f64,
+    /// Number of AL iterations `≥ 1`.
+    pub iterations: usize,
+    /// When `μ` grows.
+    pub mu_update: MuUpdate,
+}
+
+impl Default for AlSchedule {
+    fn default() -> Self {
+        Self { mu: 1.0, mu_factor: 10.0, mu_max: 1e6, iterations: 1, mu_update: MuUpdate::Always }
+    }
+}
+
+impl AlSchedule {
+    fn check(&self) -> Result<()> {
+        let ok = self.mu.is_finite()
+            && self.mu > 0.0
+            && self.mu_factor.is_finite()
+            && self.mu_factor >= 1.0
+            && self.mu_max >= self.mu
+            && self.iterations >= 1;
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::InvalidParameter(format!(
+                "augmented Lagrangian needs mu > 0, mu_factor ≥ 1, mu_max ≥ mu and at least one iteration, got {self:?}"
+            )))
+        }
+    }
+}
+
+/// One stage: flow, template, attachment and its weight, optional constraints.
+#[derive(Clone, Copy)]
+pub struct Stage<'a> {
+    /// The flow.
+    pub flow: &'a Flow,
+    /// `q^0`.
+    pub template: &'a [Vec3],
+    /// `g`.
+    pub attachment: &'a dyn Attachment,
+    /// `w_data`.
+    pub data_weight: f64,
+    /// Medial constraints, or none.
+    pub constraints: Option<&'a dyn ConstraintSet>,
+}
+
+/// Where an L-BFGS iteration sits in the schedule.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress<'r> {
+    /// AL iteration (0-based).
+    pub al_iteration: usize,
+    /// `μ` of this AL iteration (0 without constraints).
+    pub mu: f64,
+    /// The L-BFGS iteration.
+    pub report: &'r IterationReport<'r>,
+}
+
+/// The outcome of a stage.
+#[derive(Clone, Debug)]
+pub struct StageOutcome {
+    /// Final controls.
+    pub controls: Vec<f64>,
+    /// Figures of the last minimisation at its optimum.
+    pub evaluation: Evaluation,
+    /// L-BFGS iterations over all AL iterations.
+    pub iterations: usize,
+    /// Value + gradient evaluations over all AL iterations.
+    pub evaluations: usize,
+    /// AL iterations done.
+    pub al_iterations: usize,
+    /// `μ` after the schedule.
+    pub mu: f64,
+    /// Why each minimisation stopped.
+    pub stops: Vec<StopReason>,
+}
+
+/// Runs a stage from the controls `start`: one minimisation without constraints, the AL
+/// schedule with them.
+pub fn run_stage(
+    stage: &Stage<'_>,
+    schedule: &AlSchedule,
+    options: &LbfgsOptions,
+    start: Vec<f64>,
+    mut progress: impl FnMut(&Progress<'_>),
+) -> Result<StageOutcome> {
+    let Some(constraints) = stage.constraints else {
+        let objective = Objective::new(stage.flow, stage.template, stage.attachment, stage.data_weight);
+        let min = minimize(&objective, start, options, |r| progress(&Progress { al_iteration: 0, mu: 0.0, report: r }))?;
+        return Ok(StageOutcome {
+            controls: min.controls,
+            evaluation: min.evaluation,
+            iterations: min.iterations,
+            evaluations: min.evaluations,
+            al_iterations: 1,
+            mu: 0.0,
+            stops: vec![min.stop],
+        });
+    };
+    schedule.check()?;
+    let mut lambda = vec![0.0; stage.flow.time_steps() * constraints.len()];
+    let mut mu = schedule.mu;
+    let mut controls = start;
+    let mut outcome =
+        StageOutcome { controls: Vec::new(), evaluation: Evaluation::default(), iterations: 0, evaluations: 0, al_iterations: 0, mu, stops: Vec::new() };
+    let mut previous_violation = f64::INFINITY;
+    for al_iteration in 0..schedule.iterations {
+        let objective = Objective::new(stage.flow, stage.template, stage.attachment, stage.data_weight)
+            .with_penalty(Penalty { constraints, mu, lambda: &lambda })?;
+        let min = minimize(&objective, controls, options, |r| progress(&Progress { al_iteration, mu, report: r }))?;
+        let values = objective.constraint_values(&min.controls)?;
+        lambda.iter_mut().zip(&values).for_each(|(lam, c)| *lam -= mu * c);
+        let violation = min.evaluation.max_abs_constraint;
+        let grow = match schedule.mu_update {
+            MuUpdate::Always => true,
+            MuUpdate::IfNotHalved => violation > 0.5 * previous_violation,
+        };
+        previous_violation = violation;
+        outcome.iterations += min.iterations;
+        outcome.evaluations += min.evaluations;
+        outcome.al_iterations += 1;
+        outcome.evaluation = min.evaluation;
+        outcome.stops.push(min.stop);
+        controls = min.controls;
+        if grow {
+            mu = (mu * schedule.mu_factor).min(schedule.mu_max);
+        }
+    }
+    outcome.controls = controls;
+    outcome.mu = mu;
+    Ok(outcome)
+}
