@@ -150,7 +150,7 @@ pub fn run_stage(
         outcome.iterations += min.iterations;
         outcome.evaluations += min.evaluations;
         outcome.al_iterations += 1;
-        outcome.evaluation = min.evaluation;
+        outcome.evaluation = min.evaluation.clone();
         outcome.stops.push(min.stop);
         controls = min.controls;
         if grow {

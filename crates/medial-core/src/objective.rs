@@ -21,6 +21,18 @@ pub trait ConstraintSet: Sync {
     fn accumulate_gradient(&self, q: &[Vec3], weights: &[f64], grad: &mut [Vec3]);
 }
 
+impl ConstraintSet for crate::constraints::MedialConstraints {
+    fn len(&self) -> usize {
+        self.len()
+    }
+    fn evaluate(&self, q: &[Vec3], out: &mut [f64]) {
+        self.evaluate(q, out)
+    }
+    fn accumulate_gradient(&self, q: &[Vec3], weights: &[f64], grad: &mut [Vec3]) {
+        self.accumulate_gradient(q, weights, grad)
+    }
+}
+
 /// The augmented-Lagrangian penalty: constraints, `μ`, and multipliers `λ^n_l` stored
 /// time point after time point (`lambda[(n−1)·L + l]`, `n = 1 … N`).
 #[derive(Clone, Copy)]
@@ -34,7 +46,7 @@ pub struct Penalty<'a> {
 }
 
 /// The figures of one evaluation. `kinetic` and `data` are unweighted.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Evaluation {
     /// `E_AL`.
     pub total: f64,
@@ -48,6 +60,8 @@ pub struct Evaluation {
     pub max_abs_constraint: f64,
     /// The Dice coefficient when the attachment estimates one.
     pub dice: Option<f64>,
+    /// The landmarks at the end of the flow, `q^N`.
+    pub final_positions: Vec<Vec3>,
 }
 
 /// One stage's objective over the controls `u` (flat, `N·k·3`).
@@ -96,20 +110,13 @@ impl<'a> Objective<'a> {
         let k = self.template.len();
         let q_final = trajectory.final_positions();
         let mut terminal = vec![Vec3::zeros(); k];
-        let data = self.attachment.evaluate(&q_final, grad.is_some().then_some(&mut terminal[..]));
+        let data = self.attachment.evaluate(&q_final, grad.is_some().then_some(&mut terminal[..]))?;
         terminal.iter_mut().for_each(|g| *g *= self.data_weight);
         let constraint_values = self.constraint_values_of(&trajectory);
         let (penalty, max_abs_constraint) = self.penalty_value(&constraint_values);
-        let evaluation = Evaluation {
-            total: self.flow.kinetic_weight() * trajectory.kinetic_energy() + self.data_weight * data.value + penalty,
-            kinetic: trajectory.kinetic_energy(),
-            data: data.value,
-            penalty,
-            max_abs_constraint,
-            dice: data.dice,
-        };
-        if !evaluation.total.is_finite() {
-            return Err(Error::NonFinite(format!("objective is {}", evaluation.total)));
+        let total = self.flow.kinetic_weight() * trajectory.kinetic_energy() + self.data_weight * data.value + penalty;
+        if !total.is_finite() {
+            return Err(Error::NonFinite(format!("objective is {total}")));
         }
         if let Some(grad) = grad {
             let n_steps = self.flow.time_steps();
@@ -122,7 +129,15 @@ impl<'a> Objective<'a> {
                 grad,
             )?;
         }
-        Ok(evaluation)
+        Ok(Evaluation {
+            total,
+            kinetic: trajectory.kinetic_energy(),
+            data: data.value,
+            penalty,
+            max_abs_constraint,
+            dice: data.dice,
+            final_positions: q_final,
+        })
     }
 
     /// Constraint values at time points `1 … N` under the controls `u` (`N·L` numbers), for

@@ -219,7 +219,7 @@ impl<'o, 'a> Cached<'o, 'a> {
 
     fn current(&self) -> (Evaluation, f64) {
         let last = self.lock();
-        (last.evaluation, last.gradient.iter().map(|g| g * g).sum::<f64>().sqrt())
+        (last.evaluation.clone(), last.gradient.iter().map(|g| g * g).sum::<f64>().sqrt())
     }
 
     fn count(&self) -> usize {

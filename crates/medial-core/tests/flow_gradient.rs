@@ -116,7 +116,7 @@ fn gradient_matches_dense_implementation() {
                 case.constraints.accumulate_gradient(q, &weights, &mut g);
                 if n == steps {
                     let mut gd = vec![Vec3::zeros(); q.len()];
-                    value += 1.3 * ssd.evaluate(q, Some(&mut gd)).value;
+                    value += 1.3 * ssd.evaluate(q, Some(&mut gd)).unwrap().value;
                     g.iter_mut().zip(&gd).for_each(|(g, d)| *g += 1.3 * d);
                 }
                 (value, g)

@@ -1,1 +1,333 @@
-//! (in progress)
+//! Triangle meshes in the formats users bring, chosen by file extension (case-insensitive):
+//! legacy VTK polydata (`.vtk`), Wavefront OBJ (`.obj`) and glTF 2.0 (`.gltf`, `.glb`).
+//!
+//! Vertex order is kept as in the file, so that vertex `i` of a subject can correspond to
+//! vertex `i` of a template: the OBJ reader therefore parses `v` and `f` statements itself
+//! (`tobj` renumbers vertices in order of first use). Non-triangle faces are refused, never
+//! triangulated behind the user's back.
+
+use std::collections::HashSet;
+use std::io::Write as _;
+use std::path::Path;
+
+use medial_core::{TriMesh, Vec3};
+use nalgebra::{Matrix4, Point3};
+
+use crate::atomic::write_atomic;
+use crate::vtk::{self, WriteOptions};
+use crate::{Error, Result};
+
+/// The mesh formats, by extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum MeshFormat {
+    Vtk,
+    Obj,
+    Gltf,
+}
+
+const SUPPORTED: &str = "supported: .vtk, .obj, .gltf, .glb";
+
+impl MeshFormat {
+    fn of(path: &Path) -> Result<Self> {
+        let extension = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .ok_or_else(|| {
+                Error::format(
+                    path,
+                    format!("the file name has no extension ({SUPPORTED})"),
+                )
+            })?;
+        match extension.as_str() {
+            "vtk" => Ok(MeshFormat::Vtk),
+            "obj" => Ok(MeshFormat::Obj),
+            "gltf" | "glb" => Ok(MeshFormat::Gltf),
+            other => Err(Error::format(
+                path,
+                format!("unknown mesh extension '.{other}' ({SUPPORTED})"),
+            )),
+        }
+    }
+}
+
+/// Reads a triangle mesh, the format chosen by the extension:
+/// - `.vtk`: [`vtk::read_trimesh`] (polygons must all be triangles);
+/// - `.obj`: the `v` (first three coordinates) and `f` statements, in file order, with
+///   `i`, `i/t`, `i//n`, `i/t/n` and negative (relative) indices; everything else (normals,
+///   texture coordinates, groups, materials, lines) is ignored; faces must be triangles;
+/// - `.gltf`/`.glb`: the `TRIANGLES` primitives of every mesh instance of the default scene
+///   (else the first scene; else of every root node; else of every mesh, untransformed),
+///   node transforms applied (winding reversed under mirroring transforms), merged in document
+///   order without welding vertices; buffers may be embedded, in the GLB chunk, or external
+///   files beside the glTF.
+///
+/// Errors: [`Error::Io`] when the file cannot be read; [`Error::Format`] for an unknown
+/// extension (listing the supported ones), a malformed file, a non-triangle face or primitive
+/// mode; [`Error::Model`] when [`TriMesh::new`] refuses the mesh (index out of range, repeated
+/// corner, non-finite point).
+pub fn read_mesh(path: &Path) -> Result<TriMesh> {
+    match MeshFormat::of(path)? {
+        MeshFormat::Vtk => vtk::read_trimesh(path),
+        MeshFormat::Obj => parse_obj(&read_bytes(path)?, path),
+        MeshFormat::Gltf => parse_gltf(&read_bytes(path)?, path),
+    }
+}
+
+/// Writes a triangle mesh atomically, the format chosen by the extension: `.vtk` (ASCII,
+/// `# vtk DataFile Version 4.2` layout, points as `double`) or `.obj` (`v x y z` lines then
+/// 1-based `f a b c` lines). Coordinates are written in the shortest form that reads back to
+/// the same `f64`.
+///
+/// Errors: [`Error::Format`] for other extensions (glTF is read-only); [`Error::Io`] when the
+/// file cannot be written.
+pub fn write_mesh(path: &Path, mesh: &TriMesh) -> Result<()> {
+    match MeshFormat::of(path)? {
+        MeshFormat::Vtk => vtk::write_trimesh(path, mesh, WriteOptions::default()),
+        MeshFormat::Obj => {
+            let bytes = obj_bytes(mesh);
+            write_atomic(path, |w| w.write_all(&bytes))
+        }
+        MeshFormat::Gltf => Err(Error::format(
+            path,
+            "writing glTF is not supported; write the mesh as .vtk or .obj",
+        )),
+    }
+}
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|e| Error::io(path, e))
+}
+
+// ---------------------------------------------------------------------------------------------
+// OBJ.
+
+fn parse_obj(bytes: &[u8], path: &Path) -> Result<TriMesh> {
+    let mut points = Vec::new();
+    let mut triangles = Vec::new();
+    for (number, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        let error =
+            |message: String| Error::format(path, format!("{message} (line {})", number + 1));
+        let content = line.split(|&b| b == b'#').next().unwrap_or_default();
+        let mut words = content
+            .split(|b| b.is_ascii_whitespace())
+            .filter(|w| !w.is_empty());
+        match words.next() {
+            Some(b"v") => points.push(obj_vertex(words).map_err(error)?),
+            Some(b"f") => triangles.push(obj_face(words, points.len()).map_err(error)?),
+            _ => {}
+        }
+    }
+    TriMesh::new(points, triangles).map_err(|e| Error::model(path, e))
+}
+
+/// `v x y z [w | r g b]`: the first three coordinates.
+fn obj_vertex<'a>(words: impl Iterator<Item = &'a [u8]>) -> std::result::Result<Vec3, String> {
+    let coordinates = words
+        .take(3)
+        .map(|w| {
+            std::str::from_utf8(w)
+                .ok()
+                .and_then(|t| t.parse::<f64>().ok())
+                .ok_or_else(|| format!("'{}' is not a number", String::from_utf8_lossy(w)))
+        })
+        .collect::<std::result::Result<Vec<f64>, String>>()?;
+    match coordinates.as_slice() {
+        &[x, y, z] => Ok(Vec3::new(x, y, z)),
+        _ => Err(format!(
+            "a vertex needs 3 coordinates, found {}",
+            coordinates.len()
+        )),
+    }
+}
+
+/// `f a b c` with `a` = `i`, `i/t`, `i//n` or `i/t/n`; `i` 1-based, or negative counting back
+/// from the last vertex defined so far.
+fn obj_face<'a>(
+    words: impl Iterator<Item = &'a [u8]>,
+    defined: usize,
+) -> std::result::Result<[usize; 3], String> {
+    let corners = words
+        .map(|w| obj_index(w, defined))
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    match corners.as_slice() {
+        &[a, b, c] => Ok([a, b, c]),
+        _ => Err(format!(
+            "a face with {} vertices; only triangles are supported (triangulate the mesh first)",
+            corners.len()
+        )),
+    }
+}
+
+fn obj_index(word: &[u8], defined: usize) -> std::result::Result<usize, String> {
+    let text = String::from_utf8_lossy(word);
+    let position = text.split('/').next().unwrap_or_default();
+    let index: i64 = position
+        .parse()
+        .map_err(|_| format!("'{text}' is not a face vertex"))?;
+    let resolved = match index {
+        0 => None,
+        i if i > 0 => usize::try_from(i - 1).ok(),
+        i => usize::try_from(i.unsigned_abs())
+            .ok()
+            .and_then(|back| defined.checked_sub(back)),
+    };
+    resolved.ok_or_else(|| {
+        format!("face vertex {index} is invalid ({defined} vertices defined so far)")
+    })
+}
+
+fn obj_bytes(mesh: &TriMesh) -> Vec<u8> {
+    let mut out = Vec::new();
+    // Writing to a Vec<u8> cannot fail.
+    let _ = writeln!(
+        out,
+        "# written by medial: {} vertices, {} triangles",
+        mesh.points().len(),
+        mesh.triangles().len()
+    );
+    for p in mesh.points() {
+        out.push(b'v');
+        for c in [p.x, p.y, p.z] {
+            out.push(b' ');
+            vtk::push_f64(&mut out, c);
+        }
+        out.push(b'\n');
+    }
+    for [a, b, c] in mesh.triangles() {
+        let _ = writeln!(out, "f {} {} {}", a + 1, b + 1, c + 1);
+    }
+    out
+}
+
+// ---------------------------------------------------------------------------------------------
+// glTF.
+
+fn parse_gltf(bytes: &[u8], path: &Path) -> Result<TriMesh> {
+    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(bytes)
+        .map_err(|e| Error::format(path, format!("invalid glTF: {e}")))?;
+    let buffers = gltf::import_buffers(&document, path.parent(), blob)
+        .map_err(|e| Error::format(path, format!("cannot load the glTF buffers: {e}")))?;
+    let mut points = Vec::new();
+    let mut triangles = Vec::new();
+    for (mesh, transform) in mesh_instances(&document, path)? {
+        for primitive in mesh.primitives() {
+            add_primitive(
+                &mut points,
+                &mut triangles,
+                &primitive,
+                &buffers,
+                &transform,
+            )
+            .map_err(|m| {
+                let name = mesh.name().map(|n| format!(" '{n}'")).unwrap_or_default();
+                Error::format(
+                    path,
+                    format!(
+                        "mesh {}{name}, primitive {}: {m}",
+                        mesh.index(),
+                        primitive.index()
+                    ),
+                )
+            })?;
+        }
+    }
+    TriMesh::new(points, triangles).map_err(|e| Error::model(path, e))
+}
+
+/// Every mesh instance with its world transform, in document (depth-first) order.
+fn mesh_instances<'a>(
+    document: &'a gltf::Document,
+    path: &Path,
+) -> Result<Vec<(gltf::Mesh<'a>, Matrix4<f64>)>> {
+    let roots: Vec<gltf::Node> = match document
+        .default_scene()
+        .or_else(|| document.scenes().next())
+    {
+        Some(scene) => scene.nodes().collect(),
+        None => {
+            let children: HashSet<usize> = document
+                .nodes()
+                .flat_map(|n| n.children().map(|c| c.index()))
+                .collect();
+            document
+                .nodes()
+                .filter(|n| !children.contains(&n.index()))
+                .collect()
+        }
+    };
+    let node_count = document.nodes().count();
+    let mut stack: Vec<(gltf::Node, Matrix4<f64>, usize)> = roots
+        .into_iter()
+        .rev()
+        .map(|n| (n, Matrix4::identity(), 0))
+        .collect();
+    let mut instances = Vec::new();
+    while let Some((node, parent, depth)) = stack.pop() {
+        if depth > node_count {
+            return Err(Error::format(path, "the glTF node hierarchy has a cycle"));
+        }
+        let columns = node.transform().matrix();
+        let world = parent * Matrix4::from_fn(|r, c| f64::from(columns[c][r]));
+        if let Some(mesh) = node.mesh() {
+            instances.push((mesh, world));
+        }
+        stack.extend(
+            node.children()
+                .collect::<Vec<_>>()
+                .into_iter()
+                .rev()
+                .map(|c| (c, world, depth + 1)),
+        );
+    }
+    if instances.is_empty() {
+        instances = document
+            .meshes()
+            .map(|m| (m, Matrix4::identity()))
+            .collect();
+    }
+    Ok(instances)
+}
+
+/// Appends the vertices (transformed) and triangles of one `TRIANGLES` primitive.
+fn add_primitive(
+    points: &mut Vec<Vec3>,
+    triangles: &mut Vec<[usize; 3]>,
+    primitive: &gltf::Primitive,
+    buffers: &[gltf::buffer::Data],
+    transform: &Matrix4<f64>,
+) -> std::result::Result<(), String> {
+    let mode = primitive.mode();
+    if mode != gltf::mesh::Mode::Triangles {
+        return Err(format!("mode {mode:?} is not supported, only TRIANGLES"));
+    }
+    let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| d.0.as_slice()));
+    let positions = reader.read_positions().ok_or("no POSITION attribute")?;
+    let base = points.len();
+    points.extend(positions.map(|[x, y, z]| {
+        let p = Point3::new(f64::from(x), f64::from(y), f64::from(z));
+        transform.transform_point(&p).coords
+    }));
+    let count = points.len() - base;
+    let indices: Vec<usize> = match reader.read_indices() {
+        Some(indices) => indices.into_u32().map(|i| i as usize).collect(),
+        None => (0..count).collect(),
+    };
+    if indices.len() % 3 != 0 {
+        return Err(format!("{} indices, not a multiple of 3", indices.len()));
+    }
+    if let Some(bad) = indices.iter().find(|&&i| i >= count) {
+        return Err(format!(
+            "index {bad} but the primitive has {count} vertices"
+        ));
+    }
+    let mirrored = transform.fixed_view::<3, 3>(0, 0).determinant() < 0.0;
+    triangles.extend(indices.chunks_exact(3).map(|t| {
+        let [a, b, c] = [base + t[0], base + t[1], base + t[2]];
+        if mirrored {
+            [a, c, b]
+        } else {
+            [a, b, c]
+        }
+    }));
+    Ok(())
+}

@@ -1,1 +1,307 @@
-//! (in progress)
+//! NIfTI-1 volumes (`.nii`, `.nii.gz`) ↔ [`Volume`].
+//!
+//! **Reading** (any integer or floating-point datatype; `scl_slope`/`scl_inter` applied when
+//! the slope is not 0). The voxel-to-world map follows the NIfTI-1 standard (`nifti1.h`, and
+//! `nifti1_io.c`, its reference reader), in RAS+ millimetres:
+//! - `sform_code > 0`: the rows `srow_x`, `srow_y`, `srow_z` (method 3);
+//! - else `qform_code > 0`: `R · diag(dx, dy, qfac·dz)` and offset `(qoffset_x, y, z)`, with `R`
+//!   the rotation of the unit quaternion `(a, b, c, d)`, `a = √(1 − b² − c² − d²)` (if
+//!   `1 − b² − c² − d² < 10⁻⁷`, `a = 0` and `(b, c, d)` is normalised), `qfac = −1` if
+//!   `pixdim[0] < 0` else `+1`, and a non-positive spacing taken as 1 (method 2);
+//! - else `diag(dx, dy, dz)` with no offset (method 1).
+//!
+//! A spacing `pixdim[i]` that is 0 or not finite is taken as 1, as in `nifti1_io.c`. Volumes
+//! of 1 to 3 dimensions are read (missing dimensions have size 1); higher dimensions must have
+//! size 1 (a 4-D file with one time point is fine).
+//!
+//! **Writing** ([`write_nifti`]): the sform holds the affine map with `sform_code = 1`
+//! (`NIFTI_XFORM_SCANNER_ANAT`); when the voxel axes are orthogonal the qform holds the same
+//! map (quaternion, `qfac` for a left-handed grid) with `qform_code = 1`, else `qform_code = 0`.
+//! `pixdim[1..=3]` are the column norms of the affine map, units are mm. Header fields are
+//! 32-bit floats, so the map is stored to about 7 significant digits. The file is written to a
+//! temporary file beside the destination and renamed into place; a `.gz` name is compressed.
+
+use std::path::Path;
+
+use medial_core::volume::Volume;
+use medial_core::Vec3;
+use nalgebra::{Matrix3, Matrix4, Quaternion, UnitQuaternion};
+use nifti::writer::WriterOptions;
+use nifti::{Endianness, IntoNdArray, NiftiHeader, NiftiObject, ReaderOptions, XForm};
+
+use crate::{Error, Result};
+
+/// `NIFTI_UNITS_MM` in `xyzt_units`.
+const UNITS_MM: u8 = 2;
+
+/// Tolerance on `|DᵀD − I|` (D the normalised direction matrix) for writing a qform.
+const ORTHOGONAL_TOLERANCE: f64 = 1e-6;
+
+/// The voxel types [`write_nifti`] can store.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NiftiType {
+    /// `DT_UINT8`: integers 0 … 255 (masks and label maps).
+    U8,
+    /// `DT_INT16`: integers −32768 … 32767.
+    I16,
+    /// `DT_FLOAT32`: values rounded to single precision.
+    F32,
+    /// `DT_FLOAT64`: values stored exactly.
+    F64,
+}
+
+/// Reads a `.nii` or `.nii.gz` volume (see the module doc for the world coordinates).
+///
+/// Errors: [`Error::Io`] if the file cannot be opened, [`Error::Format`] for an unreadable
+/// header or data, an unsupported datatype (complex, RGB, …) or more than 3 non-trivial
+/// dimensions, [`Error::Model`] for values or an affine map the engine refuses (NaN voxels, a
+/// singular map).
+pub fn read_nifti(path: &Path) -> Result<Volume> {
+    let object = ReaderOptions::new().read_file(path).map_err(|e| nifti_error(path, e))?;
+    let header = object.header().clone();
+    let dims = spatial_dims(&header).map_err(|m| Error::format(path, m))?;
+    check_datatype(&header).map_err(|m| Error::format(path, m))?;
+    let affine = voxel_to_world(&header);
+    let array = object.into_volume().into_ndarray::<f64>().map_err(|e| nifti_error(path, e))?;
+    // NIfTI data are in Fortran order (x fastest), as are the arrays the crate builds.
+    let data = array
+        .as_slice_memory_order()
+        .ok_or_else(|| Error::format(path, "voxel data are not contiguous"))?
+        .to_vec();
+    Volume::new(dims, data, affine).map_err(|e| Error::model(path, e))
+}
+
+/// Writes `volume` as `.nii` or `.nii.gz` (by the file name) with voxel type `datatype` (see
+/// the module doc for the header).
+///
+/// Errors: [`Error::Format`] for another extension, a dimension above 32767, or a value that
+/// the datatype cannot hold (non-integer or out of range for `U8`/`I16`, beyond the `f32` range
+/// for `F32`); [`Error::Io`] if the file cannot be written.
+pub fn write_nifti(path: &Path, volume: &Volume, datatype: NiftiType) -> Result<()> {
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let suffix = [".nii.gz", ".nii"]
+        .into_iter()
+        .find(|s| name.ends_with(s) && name.len() > s.len())
+        .ok_or_else(|| Error::format(path, "a NIfTI file name must end in .nii or .nii.gz"))?;
+    let dim = raw_dims(volume.dims()).map_err(|m| Error::format(path, m))?;
+    let bytes = encode(volume.data(), datatype).map_err(|m| Error::format(path, m))?;
+    let header = header_for(volume, datatype);
+    let raw = nifti::InMemNiftiVolume::from_raw_fields(
+        dim,
+        crate_type(datatype),
+        0.0,
+        0.0,
+        bytes,
+        Endianness::native(),
+    )
+    .map_err(|e| nifti_error(path, e))?;
+    let temp = temp_file_beside(path, suffix).map_err(|e| Error::io(path, e))?;
+    let options = WriterOptions::new(temp.path()).reference_header(&header);
+    // The crate writes `ndarray`s; its own volume type converts the raw bytes to one.
+    let written = match datatype {
+        NiftiType::U8 => raw.into_ndarray::<u8>().and_then(|a| options.write_nifti(&a)),
+        NiftiType::I16 => raw.into_ndarray::<i16>().and_then(|a| options.write_nifti(&a)),
+        NiftiType::F32 => raw.into_ndarray::<f32>().and_then(|a| options.write_nifti(&a)),
+        NiftiType::F64 => raw.into_ndarray::<f64>().and_then(|a| options.write_nifti(&a)),
+    };
+    written.map_err(|e| nifti_error(path, e))?;
+    temp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
+    temp.persist(path).map_err(|e| Error::io(path, e.error))?;
+    Ok(())
+}
+
+/// The voxel-to-world map of a header: sform, else qform, else the spacings (module doc).
+fn voxel_to_world(header: &NiftiHeader) -> Matrix4<f64> {
+    let spacing = |i: usize| {
+        let d = f64::from(header.pixdim[i]);
+        if d == 0.0 || !d.is_finite() {
+            1.0
+        } else {
+            d
+        }
+    };
+    if header.sform_code > 0 {
+        let rows = [header.srow_x, header.srow_y, header.srow_z];
+        return Matrix4::from_fn(|r, c| if r < 3 { f64::from(rows[r][c]) } else { f64::from(u8::from(c == 3)) });
+    }
+    if header.qform_code > 0 {
+        let qfac = if header.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
+        let positive = |i: usize| if spacing(i) > 0.0 { spacing(i) } else { 1.0 };
+        let scale = Vec3::new(positive(1), positive(2), qfac * positive(3));
+        let rotation = quaternion_rotation(header.quatern_b, header.quatern_c, header.quatern_d);
+        let offset = nalgebra::Vector3::new(header.quatern_x, header.quatern_y, header.quatern_z).map(f64::from);
+        return affine(&(rotation * Matrix3::from_diagonal(&scale)), &offset);
+    }
+    affine(&Matrix3::from_diagonal(&Vec3::new(spacing(1), spacing(2), spacing(3))), &Vec3::zeros())
+}
+
+/// The rotation of the NIfTI quaternion `(a, b, c, d)`, `a` implied (`nifti_quatern_to_mat44`).
+fn quaternion_rotation(b: f32, c: f32, d: f32) -> Matrix3<f64> {
+    let (mut b, mut c, mut d) = (f64::from(b), f64::from(c), f64::from(d));
+    let rest = 1.0 - (b * b + c * c + d * d);
+    let a = if rest < 1e-7 {
+        // 180° rotation: a = 0, (b, c, d) normalised.
+        let n = (b * b + c * c + d * d).sqrt();
+        (b, c, d) = (b / n, c / n, d / n);
+        0.0
+    } else {
+        rest.sqrt()
+    };
+    #[rustfmt::skip]
+    let r = Matrix3::new(
+        a * a + b * b - c * c - d * d, 2.0 * (b * c - a * d),         2.0 * (b * d + a * c),
+        2.0 * (b * c + a * d),         a * a + c * c - b * b - d * d, 2.0 * (c * d - a * b),
+        2.0 * (b * d - a * c),         2.0 * (c * d + a * b),         a * a + d * d - c * c - b * b,
+    );
+    r
+}
+
+/// The 4×4 affine map with linear part `a` and offset `t`.
+fn affine(a: &Matrix3<f64>, t: &Vec3) -> Matrix4<f64> {
+    let mut m = Matrix4::identity();
+    m.fixed_view_mut::<3, 3>(0, 0).copy_from(a);
+    m.fixed_view_mut::<3, 1>(0, 3).copy_from(t);
+    m
+}
+
+/// `[nx, ny, nz]` from `dim`, refusing a non-trivial fourth or higher dimension.
+fn spatial_dims(header: &NiftiHeader) -> std::result::Result<[usize; 3], String> {
+    let dim = header.dim().map_err(|e| format!("invalid dimensions {:?}: {e}", header.dim))?;
+    if let Some((n, &size)) = dim.iter().enumerate().skip(3).find(|&(_, &s)| s != 1) {
+        return Err(format!(
+            "dimension {} has size {size}: only 3-D volumes (or 4-D with one time point) are \
+             supported",
+            n + 1
+        ));
+    }
+    Ok(std::array::from_fn(|a| dim.get(a).map_or(1, |&s| usize::from(s))))
+}
+
+/// Refuses datatypes that are not real scalars.
+fn check_datatype(header: &NiftiHeader) -> std::result::Result<(), String> {
+    use nifti::NiftiType as T;
+    match header.data_type() {
+        Ok(
+            T::Uint8 | T::Int8 | T::Uint16 | T::Int16 | T::Uint32 | T::Int32 | T::Uint64
+            | T::Int64 | T::Float32 | T::Float64,
+        ) => Ok(()),
+        Ok(other) => Err(format!("unsupported voxel type {other:?}: need integers or reals")),
+        Err(_) => Err(format!("unknown datatype code {}", header.datatype)),
+    }
+}
+
+/// `dim[0..8]` of a 3-D volume, refusing sizes a NIfTI-1 header (16-bit signed) cannot hold.
+fn raw_dims(dims: [usize; 3]) -> std::result::Result<[u16; 8], String> {
+    let mut dim = [3, 1, 1, 1, 1, 1, 1, 1];
+    for (a, &n) in dims.iter().enumerate() {
+        dim[a + 1] = u16::try_from(n)
+            .ok()
+            .filter(|&n| n <= i16::MAX as u16)
+            .ok_or_else(|| format!("dimension {} of size {n} exceeds the NIfTI-1 limit 32767", a + 1))?;
+    }
+    Ok(dim)
+}
+
+fn crate_type(datatype: NiftiType) -> nifti::NiftiType {
+    match datatype {
+        NiftiType::U8 => nifti::NiftiType::Uint8,
+        NiftiType::I16 => nifti::NiftiType::Int16,
+        NiftiType::F32 => nifti::NiftiType::Float32,
+        NiftiType::F64 => nifti::NiftiType::Float64,
+    }
+}
+
+/// The values as native-endian bytes of `datatype`, refusing values it cannot hold.
+fn encode(values: &[f64], datatype: NiftiType) -> std::result::Result<Vec<u8>, String> {
+    let check = |range: (f64, f64), integer: bool| {
+        match values.iter().position(|&v| !(v >= range.0 && v <= range.1) || (integer && v.fract() != 0.0)) {
+            Some(n) => Err(format!(
+                "voxel {n} has value {}, which {datatype:?} cannot hold (use a wider or floating type)",
+                values[n]
+            )),
+            None => Ok(()),
+        }
+    };
+    Ok(match datatype {
+        NiftiType::U8 => {
+            check((0.0, 255.0), true)?;
+            values.iter().map(|&v| v as u8).collect()
+        }
+        NiftiType::I16 => {
+            check((-32768.0, 32767.0), true)?;
+            values.iter().flat_map(|&v| (v as i16).to_ne_bytes()).collect()
+        }
+        NiftiType::F32 => {
+            check((-f64::from(f32::MAX), f64::from(f32::MAX)), false)?;
+            values.iter().flat_map(|&v| (v as f32).to_ne_bytes()).collect()
+        }
+        NiftiType::F64 => values.iter().flat_map(|&v| v.to_ne_bytes()).collect(),
+    })
+}
+
+/// The header fields this writer sets (the crate fills `dim`, `datatype`, `bitpix`,
+/// `vox_offset`, `scl_*` and the magic from the data).
+fn header_for(volume: &Volume, datatype: NiftiType) -> NiftiHeader {
+    let m = volume.voxel_to_world();
+    let a: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let spacing = volume.spacing();
+    let mut header = NiftiHeader {
+        datatype: crate_type(datatype) as i16,
+        xyzt_units: UNITS_MM,
+        sform_code: XForm::ScannerAnat as i16,
+        qform_code: XForm::Unknown as i16,
+        ..NiftiHeader::default()
+    };
+    header.pixdim[..4].copy_from_slice(&[1.0, spacing.x as f32, spacing.y as f32, spacing.z as f32]);
+    let row = |r: usize| std::array::from_fn(|c| m[(r, c)] as f32);
+    (header.srow_x, header.srow_y, header.srow_z) = (row(0), row(1), row(2));
+    let direction = a * Matrix3::from_diagonal(&spacing.map(|s| 1.0 / s));
+    if (direction.transpose() * direction - Matrix3::identity()).amax() < ORTHOGONAL_TOLERANCE {
+        let (qfac, q) = nifti_quaternion(&direction);
+        header.qform_code = XForm::ScannerAnat as i16;
+        header.pixdim[0] = qfac as f32;
+        (header.quatern_b, header.quatern_c, header.quatern_d) = (q.i as f32, q.j as f32, q.k as f32);
+        (header.quatern_x, header.quatern_y, header.quatern_z) = (m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32);
+    }
+    header
+}
+
+/// `qfac` and the unit quaternion (with `a ≥ 0`) of an orthogonal direction matrix: a
+/// left-handed matrix gets `qfac = −1` and its third column negated (`nifti_mat44_to_quatern`).
+fn nifti_quaternion(direction: &Matrix3<f64>) -> (f64, Quaternion<f64>) {
+    let mut r = *direction;
+    let qfac = if r.determinant() > 0.0 { 1.0 } else { -1.0 };
+    if qfac < 0.0 {
+        r.set_column(2, &(-r.column(2)));
+    }
+    let rotation = nalgebra::Rotation3::from_matrix_unchecked(r);
+    let q = UnitQuaternion::from_rotation_matrix(&rotation).into_inner();
+    (qfac, if q.w < 0.0 { -q } else { q })
+}
+
+/// A temporary file named `.<destination>.<random><suffix>` beside `path`, with the
+/// permissions of an ordinary new file (the crate picks compression from the suffix).
+fn temp_file_beside(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
+    let dir = match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent,
+        _ => Path::new("."),
+    };
+    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let prefix = format!(".{name}.");
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(suffix);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    builder.tempfile_in(dir)
+}
+
+/// An error of the `nifti` crate for `path`: I/O errors stay I/O errors.
+fn nifti_error(path: &Path, error: nifti::NiftiError) -> Error {
+    match error {
+        nifti::NiftiError::Io(e) => Error::io(path, e),
+        other => Error::format(path, format!("NIfTI: {other}")),
+    }
+}

@@ -3,7 +3,7 @@
 pub mod dice;
 pub mod ssd;
 
-use crate::Vec3;
+use crate::{Result, Vec3};
 
 /// The value of an attachment at a configuration.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -17,5 +17,16 @@ pub struct AttachmentValue {
 /// A data term `g(q)` of the landmark configuration `q` (all `k` landmarks).
 pub trait Attachment: Sync {
     /// `g(q)`; if `grad` is given (length `k`), it is overwritten with `∇g(q)`.
-    fn evaluate(&self, q: &[Vec3], grad: Option<&mut [Vec3]>) -> AttachmentValue;
+    fn evaluate(&self, q: &[Vec3], grad: Option<&mut [Vec3]>) -> Result<AttachmentValue>;
+}
+
+/// `g = 1 − DSC`, `∇g = −∇DSC`.
+impl Attachment for dice::DiceAttachment {
+    fn evaluate(&self, q: &[Vec3], mut grad: Option<&mut [Vec3]>) -> Result<AttachmentValue> {
+        let value = dice::DiceAttachment::evaluate(self, q, grad.as_deref_mut())?;
+        if let Some(grad) = grad {
+            grad.iter_mut().for_each(|g| *g = -*g);
+        }
+        Ok(AttachmentValue { value: 1.0 - value.dice, dice: Some(value.dice) })
+    }
 }

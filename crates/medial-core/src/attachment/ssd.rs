@@ -32,7 +32,7 @@ impl Ssd {
 }
 
 impl Attachment for Ssd {
-    fn evaluate(&self, q: &[Vec3], grad: Option<&mut [Vec3]>) -> AttachmentValue {
+    fn evaluate(&self, q: &[Vec3], grad: Option<&mut [Vec3]>) -> Result<AttachmentValue> {
         let value = self.targets.iter().zip(q).map(|(t, p)| (p - t).norm_squared()).sum();
         if let Some(grad) = grad {
             grad.fill(Vec3::zeros());
@@ -40,6 +40,6 @@ impl Attachment for Ssd {
                 *g = 2.0 * (p - t);
             }
         }
-        AttachmentValue { value, dice: None }
+        Ok(AttachmentValue { value, dice: None })
     }
 }

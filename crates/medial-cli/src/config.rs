@@ -1,0 +1,332 @@
+//! The TOML schedule of `medial fit`: model, flow and stages. Unknown keys are refused by name;
+//! relative paths are relative to the config file.
+
+use crate::error::CliError;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// A whole config file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// `[model]`.
+    pub model: ModelConfig,
+    /// `[flow]`.
+    #[serde(default)]
+    pub flow: FlowConfig,
+    /// `[output]`.
+    #[serde(default)]
+    pub output: OutputConfig,
+    /// `[[stage]]`, run in order.
+    #[serde(rename = "stage")]
+    pub stages: Vec<StageConfig>,
+}
+
+/// `[model]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelConfig {
+    /// The template: a cmrep medial template, or a plain triangle mesh or point set (VTK).
+    pub template: PathBuf,
+}
+
+/// `[flow]`.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FlowConfig {
+    /// Kernel width σ, in the unit of the coordinates (mm).
+    pub sigma: f64,
+    /// Number of time steps N.
+    pub time_steps: usize,
+    /// Weight of the kinetic energy.
+    pub kinetic_weight: f64,
+    /// Memory (MiB) allowed for keeping kernel matrices between the forward and backward pass.
+    pub kernel_cache_mib: usize,
+}
+
+impl Default for FlowConfig {
+    fn default() -> Self {
+        Self { sigma: 2.0, time_steps: 40, kinetic_weight: 0.05, kernel_cache_mib: 2048 }
+    }
+}
+
+/// `[output]`.
+#[derive(Clone, Copy, Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OutputConfig {
+    /// Write the model at every time point under `flow/` (else only the first and last).
+    pub every_time_point: bool,
+    /// Write VTK files in binary (smaller, faster) instead of ASCII.
+    pub binary_vtk: bool,
+}
+
+impl Default for OutputConfig {
+    fn default() -> Self {
+        Self { every_time_point: true, binary_vtk: false }
+    }
+}
+
+/// The data term of a stage.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum AttachmentKind {
+    /// Sum of squared distances to corresponding points.
+    Ssd,
+    /// `1 − Dice` against a binary image.
+    Dice,
+}
+
+/// When μ grows between augmented-Lagrangian iterations.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum MuUpdateConfig {
+    /// After every AL iteration.
+    #[default]
+    Always,
+    /// Only when max |C| did not halve.
+    IfNotHalved,
+}
+
+/// `[[stage]]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageConfig {
+    /// Name used in logs and outputs.
+    pub name: String,
+    /// `"ssd"` or `"dice"`.
+    pub attachment: AttachmentKind,
+    /// SSD: a mesh with the same points, in the same order, as the template boundary.
+    pub target: Option<PathBuf>,
+    /// SSD: a 4×4 affine matrix (text, row by row); the targets are the template's boundary
+    /// points moved by it.
+    pub transform: Option<PathBuf>,
+    /// Dice: a binary (or labelled) image.
+    pub image: Option<PathBuf>,
+    /// Dice: the foreground label (default: every voxel > 0).
+    pub label: Option<f64>,
+    /// Weight of the data term (default 1 for SSD, 100 for Dice).
+    pub weight: Option<f64>,
+    /// Dice: Gaussian smoothing of the image, mm.
+    #[serde(default = "defaults::image_sigma")]
+    pub image_sigma: f64,
+    /// Dice: midpoint subdivisions of the boundary.
+    #[serde(default = "defaults::subdivision")]
+    pub subdivision: usize,
+    /// Dice: layers between boundary and medial sheet.
+    #[serde(default = "defaults::layers")]
+    pub layers: usize,
+    /// Medial constraints (default: on for medial templates).
+    pub constraints: Option<bool>,
+    /// Initial penalty weight μ.
+    #[serde(default = "defaults::mu")]
+    pub mu: f64,
+    /// Growth of μ between AL iterations.
+    #[serde(default = "defaults::mu_factor")]
+    pub mu_factor: f64,
+    /// Upper bound of μ.
+    #[serde(default = "defaults::mu_max")]
+    pub mu_max: f64,
+    /// When μ grows.
+    #[serde(default)]
+    pub mu_update: MuUpdateConfig,
+    /// Augmented-Lagrangian iterations.
+    #[serde(default = "defaults::al_iterations")]
+    pub al_iterations: usize,
+    /// L-BFGS iterations per AL iteration.
+    #[serde(default = "defaults::max_iterations")]
+    pub max_iterations: usize,
+    /// Stop when ‖∇E‖ falls below this fraction of its initial value.
+    #[serde(default = "defaults::gradient_tolerance")]
+    pub gradient_tolerance: f64,
+    /// Stop when an iteration decreases E by less than this fraction.
+    #[serde(default = "defaults::relative_decrease")]
+    pub relative_decrease: f64,
+    /// L-BFGS memory (correction pairs).
+    #[serde(default = "defaults::lbfgs_memory")]
+    pub lbfgs_memory: usize,
+}
+
+mod defaults {
+    pub fn image_sigma() -> f64 {
+        0.2
+    }
+    pub fn subdivision() -> usize {
+        2
+    }
+    pub fn layers() -> usize {
+        5
+    }
+    pub fn mu() -> f64 {
+        1.0
+    }
+    pub fn mu_factor() -> f64 {
+        10.0
+    }
+    pub fn mu_max() -> f64 {
+        1e6
+    }
+    pub fn al_iterations() -> usize {
+        1
+    }
+    pub fn max_iterations() -> usize {
+        1000
+    }
+    pub fn gradient_tolerance() -> f64 {
+        1e-6
+    }
+    pub fn relative_decrease() -> f64 {
+        1e-9
+    }
+    pub fn lbfgs_memory() -> usize {
+        10
+    }
+}
+
+impl StageConfig {
+    /// The data weight, with the default of the attachment.
+    pub fn data_weight(&self) -> f64 {
+        self.weight.unwrap_or(match self.attachment {
+            AttachmentKind::Ssd => 1.0,
+            AttachmentKind::Dice => 100.0,
+        })
+    }
+}
+
+impl Config {
+    /// Reads, parses, resolves paths against the file's folder and checks the config.
+    pub fn load(path: &Path) -> Result<Self, CliError> {
+        let text = std::fs::read_to_string(path).map_err(|e| CliError::io(path, e))?;
+        let mut config: Config =
+            toml::from_str(&text).map_err(|e| CliError::Config { path: path.into(), message: e.to_string() })?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        config.resolve(base);
+        config.check().map_err(|message| CliError::Config { path: path.into(), message })?;
+        Ok(config)
+    }
+
+    fn resolve(&mut self, base: &Path) {
+        let join = |p: &mut PathBuf| *p = base.join(&*p);
+        join(&mut self.model.template);
+        for s in &mut self.stages {
+            [&mut s.target, &mut s.transform, &mut s.image].into_iter().flatten().for_each(join);
+        }
+    }
+
+    fn check(&self) -> Result<(), String> {
+        let f = &self.flow;
+        positive("flow.sigma", f.sigma)?;
+        non_negative("flow.kinetic_weight", f.kinetic_weight)?;
+        if f.time_steps == 0 {
+            return Err("flow.time_steps must be at least 1".into());
+        }
+        if self.stages.is_empty() {
+            return Err("the config has no [[stage]]".into());
+        }
+        let mut names = std::collections::HashSet::new();
+        for s in &self.stages {
+            if !names.insert(&s.name) {
+                return Err(format!("two stages are named '{}'", s.name));
+            }
+            s.check().map_err(|e| format!("stage '{}': {e}", s.name))?;
+        }
+        Ok(())
+    }
+
+    /// The stage called `name`.
+    pub fn stage(&self, name: &str) -> Option<&StageConfig> {
+        self.stages.iter().find(|s| s.name == name)
+    }
+}
+
+impl StageConfig {
+    fn check(&self) -> Result<(), String> {
+        match self.attachment {
+            AttachmentKind::Ssd => match (&self.target, &self.transform) {
+                (Some(_), Some(_)) => return Err("give either target or transform, not both".into()),
+                (None, None) => return Err("an ssd stage needs target (a mesh) or transform (a 4×4 matrix file)".into()),
+                _ => {}
+            },
+            AttachmentKind::Dice => {
+                if self.image.is_none() {
+                    return Err("a dice stage needs image".into());
+                }
+                non_negative("image_sigma", self.image_sigma)?;
+                if self.layers == 0 {
+                    return Err("layers must be at least 1".into());
+                }
+            }
+        }
+        non_negative("weight", self.data_weight())?;
+        positive("mu", self.mu)?;
+        if !(self.mu_factor >= 1.0 && self.mu_factor.is_finite()) {
+            return Err(format!("mu_factor must be ≥ 1, got {}", self.mu_factor));
+        }
+        if self.mu_max < self.mu {
+            return Err(format!("mu_max ({}) is below mu ({})", self.mu_max, self.mu));
+        }
+        if self.al_iterations == 0 || self.lbfgs_memory == 0 {
+            return Err("al_iterations and lbfgs_memory must be at least 1".into());
+        }
+        non_negative("gradient_tolerance", self.gradient_tolerance)?;
+        non_negative("relative_decrease", self.relative_decrease)
+    }
+}
+
+fn positive(name: &str, v: f64) -> Result<(), String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("{name} must be a positive number, got {v}"))
+    }
+}
+
+fn non_negative(name: &str, v: f64) -> Result<(), String> {
+    if v.is_finite() && v >= 0.0 {
+        Ok(())
+    } else {
+        Err(format!("{name} must be a non-negative number, got {v}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MINIMAL: &str = r#"
+[model]
+template = "t.vtk"
+[[stage]]
+name = "ssd"
+attachment = "ssd"
+target = "s.vtk"
+"#;
+
+    #[test]
+    fn minimal_config_gets_defaults() {
+        let c: Config = toml::from_str(MINIMAL).unwrap();
+        assert_eq!(c.flow.time_steps, 40);
+        assert_eq!(c.stages[0].data_weight(), 1.0);
+        assert_eq!(c.stages[0].max_iterations, 1000);
+        c.check().unwrap();
+    }
+
+    #[test]
+    fn unknown_keys_are_named() {
+        let text = MINIMAL.replace("[model]", "[flow]\nsigam = 3.0\n[model]");
+        let err = toml::from_str::<Config>(&text).unwrap_err().to_string();
+        assert!(err.contains("sigam"), "{err}");
+        let text = MINIMAL.replace("target =", "targte =");
+        let err = toml::from_str::<Config>(&text).unwrap_err().to_string();
+        assert!(err.contains("targte"), "{err}");
+    }
+
+    #[test]
+    fn inconsistent_stages_are_refused() {
+        let both = MINIMAL.replace("target = \"s.vtk\"", "target = \"s.vtk\"\ntransform = \"m.txt\"");
+        assert!(toml::from_str::<Config>(&both).unwrap().check().is_err());
+        let dice = MINIMAL.replace("\"ssd\"\ntarget", "\"dice\"\ntarget");
+        assert!(toml::from_str::<Config>(&dice).unwrap().check().unwrap_err().contains("image"));
+        let bad_mu = MINIMAL.replace("target = \"s.vtk\"", "target = \"s.vtk\"\nmu = -1");
+        assert!(toml::from_str::<Config>(&bad_mu).unwrap().check().unwrap_err().contains("mu"));
+    }
+}

@@ -1,0 +1,41 @@
+//! The one error type of the command-line tool. Every message says what went wrong and where;
+//! `main` prints it and exits with a non-zero code.
+
+use std::path::{Path, PathBuf};
+
+/// What can stop a command.
+#[derive(Debug, thiserror::Error)]
+pub enum CliError {
+    /// A file could not be read or written.
+    #[error(transparent)]
+    File(#[from] medial_io::Error),
+    /// The engine refused the input or failed.
+    #[error(transparent)]
+    Engine(#[from] medial_core::Error),
+    /// The config file is invalid.
+    #[error("{}: {message}", path.display())]
+    Config {
+        /// The config file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The inputs do not fit together (sizes, stage names, missing arrays).
+    #[error("{0}")]
+    Input(String),
+    /// An operating-system error outside the file layer (creating the output folder).
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The path.
+        path: PathBuf,
+        /// The cause.
+        source: std::io::Error,
+    },
+}
+
+impl CliError {
+    /// An I/O error for `path`.
+    pub fn io(path: &Path, source: std::io::Error) -> Self {
+        CliError::Io { path: path.into(), source }
+    }
+}

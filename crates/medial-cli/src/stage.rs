@@ -1,0 +1,139 @@
+//! Turns a `[[stage]]` of the config into what the engine runs: the attachment, whether the
+//! medial constraints apply, the μ schedule and the L-BFGS options.
+
+use crate::config::{AttachmentKind, MuUpdateConfig, StageConfig};
+use crate::error::CliError;
+use crate::model::Model;
+use medial_core::attachment::dice::{DiceAttachment, DiceParams};
+use medial_core::attachment::ssd::Ssd;
+use medial_core::attachment::Attachment;
+use medial_core::augmented_lagrangian::{AlSchedule, MuUpdate};
+use medial_core::optimize::LbfgsOptions;
+use medial_core::Vec3;
+use std::path::Path;
+
+/// A stage ready to run.
+pub struct Prepared {
+    /// The data term.
+    pub attachment: Box<dyn Attachment>,
+    /// SSD targets, to report the mean distance.
+    pub ssd: Option<Ssd>,
+    /// Whether the medial constraints apply.
+    pub constrained: bool,
+    /// The μ schedule.
+    pub schedule: AlSchedule,
+    /// L-BFGS options.
+    pub lbfgs: LbfgsOptions,
+}
+
+/// Prepares `stage` for `model`.
+pub fn prepare(stage: &StageConfig, model: &Model) -> Result<Prepared, CliError> {
+    let constrained = stage.constraints.unwrap_or(model.medial().is_some());
+    if constrained && model.medial().is_none() {
+        return Err(CliError::Input(format!(
+            "stage '{}': constraints = true needs a medial template (a VTK file with a MedialIndex array)",
+            stage.name
+        )));
+    }
+    let (attachment, ssd): (Box<dyn Attachment>, Option<Ssd>) = match stage.attachment {
+        AttachmentKind::Ssd => {
+            let ssd = Ssd::new(ssd_targets(stage, model)?)?;
+            (Box::new(ssd.clone()), Some(ssd))
+        }
+        AttachmentKind::Dice => (Box::new(dice(stage, model)?), None),
+    };
+    Ok(Prepared {
+        attachment,
+        ssd,
+        constrained,
+        schedule: AlSchedule {
+            mu: stage.mu,
+            mu_factor: stage.mu_factor,
+            mu_max: stage.mu_max,
+            iterations: stage.al_iterations,
+            mu_update: match stage.mu_update {
+                MuUpdateConfig::Always => MuUpdate::Always,
+                MuUpdateConfig::IfNotHalved => MuUpdate::IfNotHalved,
+            },
+        },
+        lbfgs: LbfgsOptions {
+            max_iterations: stage.max_iterations,
+            memory: stage.lbfgs_memory,
+            gradient_tolerance: stage.gradient_tolerance,
+            relative_decrease: stage.relative_decrease,
+        },
+    })
+}
+
+/// The SSD targets: the points of `target` (same count and order as the template boundary),
+/// or the template boundary moved by the affine `transform`.
+fn ssd_targets(stage: &StageConfig, model: &Model) -> Result<Vec<Vec3>, CliError> {
+    let nb = model.boundary_count();
+    if let Some(path) = &stage.transform {
+        let m = read_affine(path)?;
+        return Ok(model.landmarks()[..nb].iter().map(|p| m.transform_point(&(*p).into()).coords).collect());
+    }
+    let path = stage.target.as_deref().expect("checked by the config: ssd has target or transform");
+    let points = read_points(path)?;
+    if points.len() != nb {
+        return Err(CliError::Input(format!(
+            "stage '{}': target {} has {} points but the template boundary has {nb}; an SSD target needs the same points in the same order",
+            stage.name,
+            path.display(),
+            points.len()
+        )));
+    }
+    Ok(points)
+}
+
+/// The points of a mesh or point set: any legacy VTK polydata, or a mesh format of
+/// [`medial_io::mesh::read_mesh`].
+fn read_points(path: &Path) -> Result<Vec<Vec3>, CliError> {
+    let is_vtk = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("vtk"));
+    Ok(if is_vtk { medial_io::vtk::read_polydata(path)?.points } else { medial_io::mesh::read_mesh(path)?.into_parts().0 })
+}
+
+/// A 4×4 affine matrix from a text file: 16 numbers, row by row, last row `0 0 0 1`.
+pub fn read_affine(path: &Path) -> Result<nalgebra::Affine3<f64>, CliError> {
+    let text = std::fs::read_to_string(path).map_err(|e| CliError::io(path, e))?;
+    let bad = |m: String| CliError::from(medial_io::Error::format(path, m));
+    let numbers: Vec<f64> = text
+        .split_whitespace()
+        .map(|w| w.parse::<f64>().map_err(|_| bad(format!("'{w}' is not a number"))))
+        .collect::<Result<_, _>>()?;
+    if numbers.len() != 16 || numbers.iter().any(|x| !x.is_finite()) {
+        return Err(bad(format!("expected 16 finite numbers (a 4×4 matrix, row by row), found {}", numbers.len())));
+    }
+    let m = nalgebra::Matrix4::from_row_slice(&numbers);
+    if m.row(3) != nalgebra::RowVector4::new(0.0, 0.0, 0.0, 1.0) {
+        return Err(bad("the last row of an affine matrix must be 0 0 0 1".into()));
+    }
+    Ok(nalgebra::Affine3::from_matrix_unchecked(m))
+}
+
+/// The Dice attachment of a stage: the image's foreground, smoothed, against the model.
+fn dice(stage: &StageConfig, model: &Model) -> Result<DiceAttachment, CliError> {
+    let template = model.medial().ok_or_else(|| {
+        CliError::Input(format!(
+            "stage '{}': the dice attachment needs a medial template (its interior is sampled between boundary and medial sheet)",
+            stage.name
+        ))
+    })?;
+    let path = stage.image.as_deref().expect("checked by the config: dice has image");
+    let image = read_volume(path)?.foreground(stage.label).smoothed(stage.image_sigma)?;
+    let medial_of: Vec<usize> = template.medial_index().iter().map(|&m| template.atom_landmark(m)).collect();
+    let params = DiceParams { subdivision: stage.subdivision, layers: stage.layers };
+    Ok(DiceAttachment::new(template.boundary_triangles(), &medial_of, template.landmark_count(), image, params)?)
+}
+
+/// A volume from NIfTI (`.nii`, `.nii.gz`) or OpenEXR (`.exr`).
+pub fn read_volume(path: &Path) -> Result<medial_core::volume::Volume, CliError> {
+    let name = path.file_name().map(|n| n.to_string_lossy().to_lowercase()).unwrap_or_default();
+    if name.ends_with(".exr") {
+        Ok(medial_io::exr_volume::read_exr_volume(path)?)
+    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        Ok(medial_io::nifti_volume::read_nifti(path)?)
+    } else {
+        Err(medial_io::Error::format(path, "unknown image format: expected .nii, .nii.gz or .exr").into())
+    }
+}

@@ -1,0 +1,320 @@
+//! Mesh files by extension: OBJ and glTF written in the tests, VTK from the shared data.
+
+use std::path::{Path, PathBuf};
+
+use medial_core::{TriMesh, Vec3};
+use medial_io::mesh::{read_mesh, write_mesh};
+use medial_io::Error;
+
+const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
+
+fn write_file(dir: &tempfile::TempDir, name: &str, bytes: &[u8]) -> PathBuf {
+    let path = dir.path().join(name);
+    std::fs::write(&path, bytes).expect("write test file");
+    path
+}
+
+fn format_message(result: medial_io::Result<TriMesh>) -> String {
+    match result {
+        Err(Error::Format { message, .. }) => message,
+        other => panic!("expected a format error, got {other:?}"),
+    }
+}
+
+const OBJ_TETRAHEDRON: &str = "# a tetrahedron
+mtllib nothing.mtl
+o tetra
+v 0 0 0
+v 1.5 0 0 1.0
+v 0 1 0 0.5 0.5 0.5
+vn 0 0 -1
+vt 0 0
+g side
+f 1/1/1 3//1 2
+f 1 2 4
+s off
+f -3/1 -1/1 -2/1
+f 2 3 4
+v 0 0 1e-3
+l 1 2
+";
+
+#[test]
+fn obj_keeps_file_order_and_ignores_the_rest() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mesh = read_mesh(&write_file(&dir, "t.OBJ", OBJ_TETRAHEDRON.as_bytes())).expect("read");
+    assert_eq!(
+        mesh.points(),
+        [
+            Vec3::zeros(),
+            Vec3::new(1.5, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.0, 0.0, 1e-3)
+        ]
+    );
+    assert_eq!(
+        mesh.triangles(),
+        [[0, 2, 1], [0, 1, 3], [0, 2, 1], [1, 2, 3]]
+    );
+}
+
+#[test]
+fn obj_quad_is_refused_with_its_line() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3\nf 1 2 3 4\n";
+    let message = format_message(read_mesh(&write_file(&dir, "q.obj", text.as_bytes())));
+    assert!(
+        message.contains("a face with 4 vertices") && message.contains("line 6"),
+        "{message}"
+    );
+    let message = format_message(read_mesh(&write_file(&dir, "b.obj", b"v 0 0\n")));
+    assert!(
+        message.contains("3 coordinates") && message.contains("line 1"),
+        "{message}"
+    );
+    let message = format_message(read_mesh(&write_file(
+        &dir,
+        "n.obj",
+        b"v 0 0 0\nf 1 -2 x\n",
+    )));
+    assert!(
+        message.contains("face vertex -2 is invalid") && message.contains("line 2"),
+        "{message}"
+    );
+    let err =
+        read_mesh(&write_file(&dir, "r.obj", b"v 0 0 0\nv 1 0 0\nf 1 2 3\n")).expect_err("range");
+    assert!(matches!(err, Error::Model { .. }), "{err:?}");
+}
+
+#[test]
+fn obj_and_vtk_round_trip() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let source = read_mesh(&Path::new(DATA).join("keops/hippos_reduc_source.vtk")).expect("vtk");
+    let points: Vec<Vec3> = source
+        .points()
+        .iter()
+        .map(|p| p * std::f64::consts::PI + Vec3::repeat(1e-9))
+        .collect();
+    let mesh = TriMesh::new(points, source.triangles().to_vec()).expect("mesh");
+    for name in ["m.obj", "m.vtk", "M.VTK"] {
+        let path = dir.path().join(name);
+        write_mesh(&path, &mesh).expect("write");
+        assert_eq!(read_mesh(&path).expect("read back"), mesh, "{name}");
+    }
+    let obj = std::fs::read_to_string(dir.path().join("m.obj")).expect("obj text");
+    assert!(obj.lines().any(|l| l == "f 1 2 3" || l.starts_with("f ")));
+    assert_eq!(obj.lines().filter(|l| l.starts_with("v ")).count(), 662);
+}
+
+#[test]
+fn unknown_extension_lists_supported_ones() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let message = format_message(read_mesh(&write_file(&dir, "m.ply", b"ply\n")));
+    assert!(
+        message.contains("'.ply'") && message.contains(".vtk, .obj, .gltf, .glb"),
+        "{message}"
+    );
+    let message = format_message(read_mesh(&write_file(&dir, "noext", b"")));
+    assert!(message.contains("no extension"), "{message}");
+    let mesh =
+        TriMesh::new(vec![Vec3::zeros(), Vec3::x(), Vec3::y()], vec![[0, 1, 2]]).expect("mesh");
+    let err = write_mesh(&dir.path().join("m.gltf"), &mesh).expect_err("read-only");
+    assert!(
+        err.to_string().contains("writing glTF is not supported"),
+        "{err}"
+    );
+    assert!(matches!(
+        read_mesh(Path::new("/nonexistent/m.obj")),
+        Err(Error::Io { .. })
+    ));
+}
+
+// ---------------------------------------------------------------------------------------------
+// glTF.
+
+fn base64(bytes: &[u8]) -> String {
+    const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut out = String::new();
+    for chunk in bytes.chunks(3) {
+        let b = [
+            chunk[0],
+            *chunk.get(1).unwrap_or(&0),
+            *chunk.get(2).unwrap_or(&0),
+        ];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for (i, shift) in [18, 12, 6, 0].into_iter().enumerate() {
+            out.push(if i <= chunk.len() {
+                char::from(ALPHABET[(n >> shift) as usize & 63])
+            } else {
+                '='
+            });
+        }
+    }
+    out
+}
+
+const TETRA: [[f32; 3]; 4] = [
+    [0.0, 0.0, 0.0],
+    [1.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0],
+    [0.0, 0.0, 1.0],
+];
+const TETRA_INDICES: [u16; 12] = [0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3];
+
+/// Positions (48 bytes) then u16 indices (24 bytes).
+fn tetra_buffer() -> Vec<u8> {
+    let mut bytes: Vec<u8> = TETRA
+        .iter()
+        .flatten()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    bytes.extend(TETRA_INDICES.iter().flat_map(|i| i.to_le_bytes()));
+    bytes
+}
+
+/// A glTF document: node 0 = mesh translated by (10, 0, 0); node 1 = scale `scale`, with
+/// child node 2 = mesh translated by (0, 1, 0). `buffer` is the buffer object's JSON.
+fn gltf_json(buffer: &str, scale: [f32; 3], mode: u32) -> String {
+    format!(
+        r#"{{
+  "asset": {{"version": "2.0"}},
+  "scene": 0,
+  "scenes": [{{"nodes": [0, 1]}}],
+  "nodes": [
+    {{"mesh": 0, "translation": [10, 0, 0]}},
+    {{"children": [2], "scale": [{}, {}, {}]}},
+    {{"mesh": 0, "translation": [0, 1, 0]}}
+  ],
+  "meshes": [{{"name": "tetra", "primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1, "mode": {mode}}}]}}],
+  "buffers": [{buffer}],
+  "bufferViews": [
+    {{"buffer": 0, "byteOffset": 0, "byteLength": 48, "target": 34962}},
+    {{"buffer": 0, "byteOffset": 48, "byteLength": 24, "target": 34963}}
+  ],
+  "accessors": [
+    {{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 1]}},
+    {{"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"}}
+  ]
+}}"#,
+        scale[0], scale[1], scale[2]
+    )
+}
+
+fn embedded_gltf(scale: [f32; 3], mode: u32) -> String {
+    let buffer = format!(
+        r#"{{"byteLength": 72, "uri": "data:application/octet-stream;base64,{}"}}"#,
+        base64(&tetra_buffer())
+    );
+    gltf_json(&buffer, scale, mode)
+}
+
+fn expected_points(scale: [f64; 3]) -> Vec<Vec3> {
+    let tetra = TETRA.map(|p| Vec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2])));
+    let first = tetra.iter().map(|p| p + Vec3::new(10.0, 0.0, 0.0));
+    let second = tetra
+        .iter()
+        .map(|p| (p + Vec3::new(0.0, 1.0, 0.0)).component_mul(&Vec3::from(scale)));
+    first.chain(second).collect()
+}
+
+#[test]
+fn gltf_with_embedded_buffer_merges_instances() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = write_file(&dir, "t.gltf", embedded_gltf([2.0, 2.0, 2.0], 4).as_bytes());
+    let mesh = read_mesh(&path).expect("read gltf");
+    assert_eq!(mesh.points(), expected_points([2.0, 2.0, 2.0]));
+    let expected: Vec<[usize; 3]> = TETRA_INDICES
+        .chunks(3)
+        .map(|t| [usize::from(t[0]), usize::from(t[1]), usize::from(t[2])])
+        .chain(TETRA_INDICES.chunks(3).map(|t| {
+            [
+                4 + usize::from(t[0]),
+                4 + usize::from(t[1]),
+                4 + usize::from(t[2]),
+            ]
+        }))
+        .collect();
+    assert_eq!(mesh.triangles(), expected);
+}
+
+#[test]
+fn gltf_mirroring_keeps_orientation() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = write_file(
+        &dir,
+        "m.gltf",
+        embedded_gltf([-1.0, 1.0, 1.0], 4).as_bytes(),
+    );
+    let mesh = read_mesh(&path).expect("read gltf");
+    assert_eq!(mesh.points(), expected_points([-1.0, 1.0, 1.0]));
+    // Signed volume of each tetrahedron instance: the same sign after mirroring.
+    let volume = |offset: usize| -> f64 {
+        mesh.triangles()[offset..offset + 4]
+            .iter()
+            .map(|&[a, b, c]| {
+                let p = mesh.points();
+                p[a].dot(&p[b].cross(&p[c])) / 6.0
+            })
+            .sum()
+    };
+    let (original, mirrored) = (volume(0), volume(4));
+    assert!((original.abs() - 1.0 / 6.0).abs() < 1e-12, "{original}");
+    assert!(
+        (mirrored - original).abs() < 1e-12,
+        "{original} vs {mirrored}"
+    );
+}
+
+#[test]
+fn gltf_binary_container() {
+    let json = gltf_json(r#"{"byteLength": 72}"#, [1.0, 1.0, 1.0], 4);
+    let mut json = json.into_bytes();
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    let bin = tetra_buffer();
+    let total = 12 + 8 + json.len() + 8 + bin.len();
+    let mut glb = b"glTF".to_vec();
+    for word in [2u32, total as u32, json.len() as u32, 0x4E4F_534A] {
+        glb.extend_from_slice(&word.to_le_bytes());
+    }
+    glb.extend_from_slice(&json);
+    for word in [bin.len() as u32, 0x004E_4942] {
+        glb.extend_from_slice(&word.to_le_bytes());
+    }
+    glb.extend_from_slice(&bin);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mesh = read_mesh(&write_file(&dir, "t.GLB", &glb)).expect("read glb");
+    assert_eq!(mesh.points(), expected_points([1.0, 1.0, 1.0]));
+    assert_eq!(mesh.triangles().len(), 8);
+}
+
+#[test]
+fn gltf_external_buffer() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    write_file(&dir, "tetra.bin", &tetra_buffer());
+    let json = gltf_json(
+        r#"{"byteLength": 72, "uri": "tetra.bin"}"#,
+        [1.0, 1.0, 1.0],
+        4,
+    );
+    let mesh = read_mesh(&write_file(&dir, "ext.gltf", json.as_bytes())).expect("read");
+    assert_eq!(mesh.points().len(), 8);
+}
+
+#[test]
+fn gltf_non_triangle_mode_is_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = write_file(
+        &dir,
+        "lines.gltf",
+        embedded_gltf([1.0, 1.0, 1.0], 1).as_bytes(),
+    );
+    let message = format_message(read_mesh(&path));
+    assert!(
+        message.contains("mesh 0 'tetra', primitive 0") && message.contains("only TRIANGLES"),
+        "{message}"
+    );
+    let message = format_message(read_mesh(&write_file(&dir, "bad.gltf", b"{not json")));
+    assert!(message.contains("invalid glTF"), "{message}");
+}
