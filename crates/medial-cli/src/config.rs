@@ -46,7 +46,12 @@ pub struct FlowConfig {
 
 impl Default for FlowConfig {
     fn default() -> Self {
-        Self { sigma: 2.0, time_steps: 40, kinetic_weight: 0.05, kernel_cache_mib: 2048 }
+        Self {
+            sigma: 2.0,
+            time_steps: 40,
+            kinetic_weight: 0.05,
+            kernel_cache_mib: 2048,
+        }
     }
 }
 
@@ -62,7 +67,10 @@ pub struct OutputConfig {
 
 impl Default for OutputConfig {
     fn default() -> Self {
-        Self { every_time_point: true, binary_vtk: false }
+        Self {
+            every_time_point: true,
+            binary_vtk: false,
+        }
     }
 }
 
@@ -196,11 +204,16 @@ impl Config {
     /// Reads, parses, resolves paths against the file's folder and checks the config.
     pub fn load(path: &Path) -> Result<Self, CliError> {
         let text = std::fs::read_to_string(path).map_err(|e| CliError::io(path, e))?;
-        let mut config: Config =
-            toml::from_str(&text).map_err(|e| CliError::Config { path: path.into(), message: e.to_string() })?;
+        let mut config: Config = toml::from_str(&text).map_err(|e| CliError::Config {
+            path: path.into(),
+            message: e.to_string(),
+        })?;
         let base = path.parent().unwrap_or(Path::new("."));
         config.resolve(base);
-        config.check().map_err(|message| CliError::Config { path: path.into(), message })?;
+        config.check().map_err(|message| CliError::Config {
+            path: path.into(),
+            message,
+        })?;
         Ok(config)
     }
 
@@ -208,7 +221,10 @@ impl Config {
         let join = |p: &mut PathBuf| *p = base.join(&*p);
         join(&mut self.model.template);
         for s in &mut self.stages {
-            [&mut s.target, &mut s.transform, &mut s.image].into_iter().flatten().for_each(join);
+            [&mut s.target, &mut s.transform, &mut s.image]
+                .into_iter()
+                .flatten()
+                .for_each(join);
         }
     }
 
@@ -242,8 +258,15 @@ impl StageConfig {
     fn check(&self) -> Result<(), String> {
         match self.attachment {
             AttachmentKind::Ssd => match (&self.target, &self.transform) {
-                (Some(_), Some(_)) => return Err("give either target or transform, not both".into()),
-                (None, None) => return Err("an ssd stage needs target (a mesh) or transform (a 4×4 matrix file)".into()),
+                (Some(_), Some(_)) => {
+                    return Err("give either target or transform, not both".into())
+                }
+                (None, None) => {
+                    return Err(
+                        "an ssd stage needs target (a mesh) or transform (a 4×4 matrix file)"
+                            .into(),
+                    )
+                }
                 _ => {}
             },
             AttachmentKind::Dice => {
@@ -262,7 +285,10 @@ impl StageConfig {
             return Err(format!("mu_factor must be ≥ 1, got {}", self.mu_factor));
         }
         if self.mu_max < self.mu {
-            return Err(format!("mu_max ({}) is below mu ({})", self.mu_max, self.mu));
+            return Err(format!(
+                "mu_max ({}) is below mu ({})",
+                self.mu_max, self.mu
+            ));
         }
         if self.al_iterations == 0 || self.lbfgs_memory == 0 {
             return Err("al_iterations and lbfgs_memory must be at least 1".into());
@@ -322,11 +348,22 @@ target = "s.vtk"
 
     #[test]
     fn inconsistent_stages_are_refused() {
-        let both = MINIMAL.replace("target = \"s.vtk\"", "target = \"s.vtk\"\ntransform = \"m.txt\"");
+        let both = MINIMAL.replace(
+            "target = \"s.vtk\"",
+            "target = \"s.vtk\"\ntransform = \"m.txt\"",
+        );
         assert!(toml::from_str::<Config>(&both).unwrap().check().is_err());
         let dice = MINIMAL.replace("\"ssd\"\ntarget", "\"dice\"\ntarget");
-        assert!(toml::from_str::<Config>(&dice).unwrap().check().unwrap_err().contains("image"));
+        assert!(toml::from_str::<Config>(&dice)
+            .unwrap()
+            .check()
+            .unwrap_err()
+            .contains("image"));
         let bad_mu = MINIMAL.replace("target = \"s.vtk\"", "target = \"s.vtk\"\nmu = -1");
-        assert!(toml::from_str::<Config>(&bad_mu).unwrap().check().unwrap_err().contains("mu"));
+        assert!(toml::from_str::<Config>(&bad_mu)
+            .unwrap()
+            .check()
+            .unwrap_err()
+            .contains("mu"));
     }
 }

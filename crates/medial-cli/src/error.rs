@@ -36,6 +36,9 @@ pub enum CliError {
 impl CliError {
     /// An I/O error for `path`.
     pub fn io(path: &Path, source: std::io::Error) -> Self {
-        CliError::Io { path: path.into(), source }
+        CliError::Io {
+            path: path.into(),
+            source,
+        }
     }
 }

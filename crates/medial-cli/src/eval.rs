@@ -41,20 +41,38 @@ pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> 
     let constraints = model.constraints().filter(|_| prepared.constrained);
     let lambda = match (&options.lambda, &constraints) {
         (Some(path), Some(c)) => read_array(path, &[steps, c.len()], "lambda")?,
-        (Some(_), None) => return Err(CliError::Input("--lambda given but the stage has no constraints".into())),
+        (Some(_), None) => {
+            return Err(CliError::Input(
+                "--lambda given but the stage has no constraints".into(),
+            ))
+        }
         (None, c) => vec![0.0; steps * c.as_ref().map_or(0, |c| c.len())],
     };
-    let mut objective = Objective::new(&flow, model.landmarks(), prepared.attachment.as_ref(), stage_cfg.data_weight());
+    let mut objective = Objective::new(
+        &flow,
+        model.landmarks(),
+        prepared.attachment.as_ref(),
+        stage_cfg.data_weight(),
+    );
     if let Some(c) = &constraints {
         let mu = options.mu.unwrap_or(stage_cfg.mu);
-        objective = objective.with_penalty(Penalty { constraints: c as &dyn ConstraintSet, mu, lambda: &lambda })?;
+        objective = objective.with_penalty(Penalty {
+            constraints: c as &dyn ConstraintSet,
+            mu,
+            lambda: &lambda,
+        })?;
     }
     let mut gradient = options.gradient.as_ref().map(|_| vec![0.0; controls.len()]);
     let evaluation = objective.evaluate(&controls, gradient.as_deref_mut())?;
     if let (Some(path), Some(g)) = (&options.gradient, &gradient) {
         medial_io::npy::write_npy(path, &[steps, k, 3], g)?;
     }
-    Ok(figures_at(&model, &prepared, &evaluation, &evaluation.final_positions))
+    Ok(figures_at(
+        &model,
+        &prepared,
+        &evaluation,
+        &evaluation.final_positions,
+    ))
 }
 
 /// Reads a `.npy` array and checks its shape.
@@ -68,7 +86,10 @@ fn read_array(path: &PathBuf, shape: &[usize], what: &str) -> Result<Vec<f64>, C
         )));
     }
     if let Some(i) = array.data.iter().position(|x| !x.is_finite()) {
-        return Err(CliError::Input(format!("{}: {what} holds a non-finite number at flat index {i}", path.display())));
+        return Err(CliError::Input(format!(
+            "{}: {what} holds a non-finite number at flat index {i}",
+            path.display()
+        )));
     }
     Ok(array.data)
 }

@@ -25,7 +25,11 @@ pub struct FitOptions {
 /// Builds the flow of a config for `landmarks` points.
 pub fn flow_of(config: &Config, landmarks: usize) -> Result<Flow, CliError> {
     let f = &config.flow;
-    let params = FlowParams { sigma: f.sigma, time_steps: f.time_steps, kinetic_weight: f.kinetic_weight };
+    let params = FlowParams {
+        sigma: f.sigma,
+        time_steps: f.time_steps,
+        kinetic_weight: f.kinetic_weight,
+    };
     Ok(Flow::new(params, landmarks)?.with_cache_budget(f.kernel_cache_mib.saturating_mul(1 << 20)))
 }
 
@@ -33,7 +37,11 @@ pub fn flow_of(config: &Config, landmarks: usize) -> Result<Flow, CliError> {
 pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
     let model = Model::load(&config.model.template)?;
     let flow = flow_of(config, model.landmarks().len())?;
-    let stages = config.stages.iter().map(|s| stage::prepare(s, &model)).collect::<Result<Vec<_>, _>>()?;
+    let stages = config
+        .stages
+        .iter()
+        .map(|s| stage::prepare(s, &model))
+        .collect::<Result<Vec<_>, _>>()?;
     let constraints = model.constraints();
     create_dir(&options.out.join("flow"))?;
     let mut log = Log::create(&options.out.join("log.csv"))?;
@@ -48,31 +56,45 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
             template: model.landmarks(),
             attachment: prepared.attachment.as_ref(),
             data_weight: cfg.data_weight(),
-            constraints: constraints.as_ref().filter(|_| prepared.constrained).map(|c| c as &dyn ConstraintSet),
+            constraints: constraints
+                .as_ref()
+                .filter(|_| prepared.constrained)
+                .map(|c| c as &dyn ConstraintSet),
         };
         let mut log_error = None;
-        let outcome = run_stage(&engine_stage, &prepared.schedule, &prepared.lbfgs, controls, |p| {
-            let q = &p.report.evaluation.final_positions;
-            let figures = figures_at(&model, prepared, p.report.evaluation, q);
-            let row = LogRow {
-                stage: &cfg.name,
-                al_iteration: p.al_iteration,
-                iteration: p.report.iteration,
-                evaluations: p.report.evaluations,
-                mu: p.mu,
-                figures: &figures,
-                grad_norm: p.report.gradient_norm,
-                seconds: start.elapsed().as_secs_f64(),
-            };
-            progress.update(&row);
-            if let Err(e) = log.row(&row) {
-                log_error.get_or_insert(e);
-            }
-        })?;
+        let outcome = run_stage(
+            &engine_stage,
+            &prepared.schedule,
+            &prepared.lbfgs,
+            controls,
+            |p| {
+                let q = &p.report.evaluation.final_positions;
+                let figures = figures_at(&model, prepared, p.report.evaluation, q);
+                let row = LogRow {
+                    stage: &cfg.name,
+                    al_iteration: p.al_iteration,
+                    iteration: p.report.iteration,
+                    evaluations: p.report.evaluations,
+                    mu: p.mu,
+                    figures: &figures,
+                    grad_norm: p.report.gradient_norm,
+                    seconds: start.elapsed().as_secs_f64(),
+                };
+                progress.update(&row);
+                if let Err(e) = log.row(&row) {
+                    log_error.get_or_insert(e);
+                }
+            },
+        )?;
         if let Some(e) = log_error {
             return Err(e);
         }
-        let figures = figures_at(&model, prepared, &outcome.evaluation, &outcome.evaluation.final_positions);
+        let figures = figures_at(
+            &model,
+            prepared,
+            &outcome.evaluation,
+            &outcome.evaluation.final_positions,
+        );
         progress.println(&format!(
             "stage '{}': {} iterations, {} evaluations, {:.1} s, total {:.6e}, stop: {}",
             cfg.name,
@@ -80,7 +102,11 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
             outcome.evaluations,
             stage_start.elapsed().as_secs_f64(),
             figures.total,
-            outcome.stops.last().map(|s| s.to_string()).unwrap_or_default()
+            outcome
+                .stops
+                .last()
+                .map(|s| s.to_string())
+                .unwrap_or_default()
         ));
         summaries.push(StageSummary {
             name: cfg.name.clone(),
@@ -109,7 +135,10 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         threads: options.threads,
         seconds,
         evaluations: summaries.iter().map(|s| s.evaluations).sum(),
-        final_figures: summaries.last().map(|s| s.figures.clone()).expect("a config has at least one stage"),
+        final_figures: summaries
+            .last()
+            .map(|s| s.figures.clone())
+            .expect("a config has at least one stage"),
         stages: summaries,
     };
     write_json(&options.out.join("summary.json"), &summary)?;
@@ -118,9 +147,18 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
 }
 
 /// The reported figures of an evaluation whose flow ends at `q`.
-pub fn figures_at(model: &Model, prepared: &Prepared, e: &medial_core::objective::Evaluation, q: &[medial_core::Vec3]) -> Figures {
+pub fn figures_at(
+    model: &Model,
+    prepared: &Prepared,
+    e: &medial_core::objective::Evaluation,
+    q: &[medial_core::Vec3],
+) -> Figures {
     let metrics = model.metrics(q);
-    Figures::new(e, metrics.as_ref(), prepared.ssd.as_ref().map(|s| s.mean_distance(q)))
+    Figures::new(
+        e,
+        metrics.as_ref(),
+        prepared.ssd.as_ref().map(|s| s.mean_distance(q)),
+    )
 }
 
 /// `momenta.npy`, the model at every time point under `flow/`, and the fitted model.
@@ -134,9 +172,17 @@ fn write_results(
 ) -> Result<(), CliError> {
     let out = &options.out;
     let k = model.landmarks().len();
-    medial_io::npy::write_npy(&out.join("momenta.npy"), &[flow.time_steps(), k, 3], controls)?;
+    medial_io::npy::write_npy(
+        &out.join("momenta.npy"),
+        &[flow.time_steps(), k, 3],
+        controls,
+    )?;
     let vtk_options = WriteOptions {
-        encoding: if config.output.binary_vtk { Encoding::Binary } else { Encoding::Ascii },
+        encoding: if config.output.binary_vtk {
+            Encoding::Binary
+        } else {
+            Encoding::Ascii
+        },
         ..WriteOptions::default()
     };
     let last = trajectory.time_points() - 1;
@@ -145,9 +191,17 @@ fn write_results(
             continue;
         }
         let q = trajectory.positions(n);
-        vtk::write_polydata(&out.join(format!("flow/boundary_t{n:03}.vtk")), &model.boundary_polydata(&q), vtk_options)?;
+        vtk::write_polydata(
+            &out.join(format!("flow/boundary_t{n:03}.vtk")),
+            &model.boundary_polydata(&q),
+            vtk_options,
+        )?;
         if let Some(medial) = model.medial_polydata(&q) {
-            vtk::write_polydata(&out.join(format!("flow/medial_t{n:03}.vtk")), &medial, vtk_options)?;
+            vtk::write_polydata(
+                &out.join(format!("flow/medial_t{n:03}.vtk")),
+                &medial,
+                vtk_options,
+            )?;
         }
     }
     let q = trajectory.final_positions();

@@ -85,15 +85,49 @@ fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
         Command::Fit { config, out } => {
             let cfg = config::Config::load(&config)?;
-            let out = out.unwrap_or_else(|| config.parent().unwrap_or(std::path::Path::new(".")).join("out"));
-            let summary = fit::run(&cfg, &fit::FitOptions { out: out.clone(), threads, quiet: cli.quiet })?;
-            println!("{}", serde_json::to_string_pretty(&summary.final_figures).expect("figures serialise"));
+            let out = out.unwrap_or_else(|| {
+                config
+                    .parent()
+                    .unwrap_or(std::path::Path::new("."))
+                    .join("out")
+            });
+            let summary = fit::run(
+                &cfg,
+                &fit::FitOptions {
+                    out: out.clone(),
+                    threads,
+                    quiet: cli.quiet,
+                },
+            )?;
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&summary.final_figures).expect("figures serialise")
+            );
             eprintln!("results in {}", out.display());
         }
-        Command::Eval { config, momenta, stage, mu, lambda, gradient } => {
+        Command::Eval {
+            config,
+            momenta,
+            stage,
+            mu,
+            lambda,
+            gradient,
+        } => {
             let cfg = config::Config::load(&config)?;
-            let figures = eval::run(&cfg, &eval::EvalOptions { momenta, stage, mu, lambda, gradient })?;
-            println!("{}", serde_json::to_string_pretty(&figures).expect("figures serialise"));
+            let figures = eval::run(
+                &cfg,
+                &eval::EvalOptions {
+                    momenta,
+                    stage,
+                    mu,
+                    lambda,
+                    gradient,
+                },
+            )?;
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&figures).expect("figures serialise")
+            );
         }
     }
     Ok(())

@@ -32,10 +32,16 @@ impl Model {
             let template = medial_io::cmrep::template_from_polydata(&data, path)?;
             return Ok(Model::Medial(Box::new(template)));
         }
-        let triangles = data.triangles().map_err(|m| medial_io::Error::format(path, m))?;
-        let mesh = medial_core::TriMesh::new(data.points, triangles).map_err(|e| medial_io::Error::model(path, e))?;
+        let triangles = data
+            .triangles()
+            .map_err(|m| medial_io::Error::format(path, m))?;
+        let mesh = medial_core::TriMesh::new(data.points, triangles)
+            .map_err(|e| medial_io::Error::model(path, e))?;
         if mesh.points().is_empty() {
-            return Err(CliError::Input(format!("{}: the template has no points", path.display())));
+            return Err(CliError::Input(format!(
+                "{}: the template has no points",
+                path.display()
+            )));
         }
         let (points, triangles) = mesh.into_parts();
         Ok(Model::Plain { points, triangles })
@@ -87,7 +93,10 @@ impl Model {
     /// `Radius` (spoke length) and `MedialIndex` for a medial template.
     pub fn boundary_polydata(&self, q: &[Vec3]) -> PolyData {
         let nb = self.boundary_count();
-        let mut data = PolyData { points: q[..nb].to_vec(), ..PolyData::default() };
+        let mut data = PolyData {
+            points: q[..nb].to_vec(),
+            ..PolyData::default()
+        };
         match self {
             Model::Plain { triangles, .. } if triangles.is_empty() => {
                 data.vertices = (0..nb).map(|i| vec![i]).collect();
@@ -98,10 +107,22 @@ impl Model {
                 let m = SpokeMetrics::compute(t, q);
                 let atom = t.medial_index();
                 data.point_data = vec![
-                    scalars("SpokeNormalAngle", m.spoke_normal_deg.clone(), ValueType::Double),
-                    scalars("SpokeMismatch", atom.iter().map(|&a| 100.0 * m.mismatch[a]).collect(), ValueType::Double),
+                    scalars(
+                        "SpokeNormalAngle",
+                        m.spoke_normal_deg.clone(),
+                        ValueType::Double,
+                    ),
+                    scalars(
+                        "SpokeMismatch",
+                        atom.iter().map(|&a| 100.0 * m.mismatch[a]).collect(),
+                        ValueType::Double,
+                    ),
                     scalars("Radius", m.spoke_length.clone(), ValueType::Double),
-                    scalars("MedialIndex", atom.iter().map(|&a| a as f64).collect(), ValueType::Int),
+                    scalars(
+                        "MedialIndex",
+                        atom.iter().map(|&a| a as f64).collect(),
+                        ValueType::Int,
+                    ),
                 ];
             }
         }
@@ -119,7 +140,11 @@ impl Model {
             polygons: cells(t.medial_triangles()),
             point_data: vec![
                 scalars("Thickness", m.thickness, ValueType::Double),
-                scalars("SpokeMismatch", m.mismatch.iter().map(|x| 100.0 * x).collect(), ValueType::Double),
+                scalars(
+                    "SpokeMismatch",
+                    m.mismatch.iter().map(|x| 100.0 * x).collect(),
+                    ValueType::Double,
+                ),
             ],
             ..PolyData::default()
         })
@@ -131,5 +156,11 @@ fn cells(triangles: &[[usize; 3]]) -> Vec<Vec<usize>> {
 }
 
 fn scalars(name: &str, values: Vec<f64>, value_type: ValueType) -> DataArray {
-    DataArray { name: name.into(), components: 1, values, kind: ArrayKind::Scalars, value_type }
+    DataArray {
+        name: name.into(),
+        components: 1,
+        values,
+        kind: ArrayKind::Scalars,
+        value_type,
+    }
 }

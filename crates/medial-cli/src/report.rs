@@ -155,7 +155,11 @@ impl Log {
         let file = std::fs::File::create(&part).map_err(|e| CliError::io(&part, e))?;
         let mut out = BufWriter::new(file);
         writeln!(out, "{LOG_HEADER}").map_err(|e| CliError::io(&part, e))?;
-        Ok(Self { out, part, path: path.into() })
+        Ok(Self {
+            out,
+            part,
+            path: path.into(),
+        })
     }
 
     /// Appends a row (flushed, so that a running fit can be watched).
@@ -188,7 +192,10 @@ impl Log {
     /// Completes the log: renames `log.csv.part` to `log.csv`.
     pub fn finish(mut self) -> Result<(), CliError> {
         self.out.flush().map_err(|e| CliError::io(&self.part, e))?;
-        self.out.get_ref().sync_all().map_err(|e| CliError::io(&self.part, e))?;
+        self.out
+            .get_ref()
+            .sync_all()
+            .map_err(|e| CliError::io(&self.part, e))?;
         std::fs::rename(&self.part, &self.path).map_err(|e| CliError::io(&self.path, e))
     }
 }
@@ -221,7 +228,10 @@ impl Progress {
             bar.enable_steady_tick(Duration::from_millis(200));
             bar
         });
-        Self { bar, last_line: Instant::now() - Duration::from_secs(60) }
+        Self {
+            bar,
+            last_line: Instant::now() - Duration::from_secs(60),
+        }
     }
 
     /// Shows the state after an iteration.

@@ -71,9 +71,15 @@ fn ssd_targets(stage: &StageConfig, model: &Model) -> Result<Vec<Vec3>, CliError
     let nb = model.boundary_count();
     if let Some(path) = &stage.transform {
         let m = read_affine(path)?;
-        return Ok(model.landmarks()[..nb].iter().map(|p| m.transform_point(&(*p).into()).coords).collect());
+        return Ok(model.landmarks()[..nb]
+            .iter()
+            .map(|p| m.transform_point(&(*p).into()).coords)
+            .collect());
     }
-    let path = stage.target.as_deref().expect("checked by the config: ssd has target or transform");
+    let path = stage
+        .target
+        .as_deref()
+        .expect("checked by the config: ssd has target or transform");
     let points = read_points(path)?;
     if points.len() != nb {
         return Err(CliError::Input(format!(
@@ -89,8 +95,14 @@ fn ssd_targets(stage: &StageConfig, model: &Model) -> Result<Vec<Vec3>, CliError
 /// The points of a mesh or point set: any legacy VTK polydata, or a mesh format of
 /// [`medial_io::mesh::read_mesh`].
 fn read_points(path: &Path) -> Result<Vec<Vec3>, CliError> {
-    let is_vtk = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("vtk"));
-    Ok(if is_vtk { medial_io::vtk::read_polydata(path)?.points } else { medial_io::mesh::read_mesh(path)?.into_parts().0 })
+    let is_vtk = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("vtk"));
+    Ok(if is_vtk {
+        medial_io::vtk::read_polydata(path)?.points
+    } else {
+        medial_io::mesh::read_mesh(path)?.into_parts().0
+    })
 }
 
 /// A 4×4 affine matrix from a text file: 16 numbers, row by row, last row `0 0 0 1`.
@@ -99,14 +111,22 @@ pub fn read_affine(path: &Path) -> Result<nalgebra::Affine3<f64>, CliError> {
     let bad = |m: String| CliError::from(medial_io::Error::format(path, m));
     let numbers: Vec<f64> = text
         .split_whitespace()
-        .map(|w| w.parse::<f64>().map_err(|_| bad(format!("'{w}' is not a number"))))
+        .map(|w| {
+            w.parse::<f64>()
+                .map_err(|_| bad(format!("'{w}' is not a number")))
+        })
         .collect::<Result<_, _>>()?;
     if numbers.len() != 16 || numbers.iter().any(|x| !x.is_finite()) {
-        return Err(bad(format!("expected 16 finite numbers (a 4×4 matrix, row by row), found {}", numbers.len())));
+        return Err(bad(format!(
+            "expected 16 finite numbers (a 4×4 matrix, row by row), found {}",
+            numbers.len()
+        )));
     }
     let m = nalgebra::Matrix4::from_row_slice(&numbers);
     if m.row(3) != nalgebra::RowVector4::new(0.0, 0.0, 0.0, 1.0) {
-        return Err(bad("the last row of an affine matrix must be 0 0 0 1".into()));
+        return Err(bad(
+            "the last row of an affine matrix must be 0 0 0 1".into()
+        ));
     }
     Ok(nalgebra::Affine3::from_matrix_unchecked(m))
 }
@@ -119,21 +139,45 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<DiceAttachment, CliError> 
             stage.name
         ))
     })?;
-    let path = stage.image.as_deref().expect("checked by the config: dice has image");
-    let image = read_volume(path)?.foreground(stage.label).smoothed(stage.image_sigma)?;
-    let medial_of: Vec<usize> = template.medial_index().iter().map(|&m| template.atom_landmark(m)).collect();
-    let params = DiceParams { subdivision: stage.subdivision, layers: stage.layers };
-    Ok(DiceAttachment::new(template.boundary_triangles(), &medial_of, template.landmark_count(), image, params)?)
+    let path = stage
+        .image
+        .as_deref()
+        .expect("checked by the config: dice has image");
+    let image = read_volume(path)?
+        .foreground(stage.label)
+        .smoothed(stage.image_sigma)?;
+    let medial_of: Vec<usize> = template
+        .medial_index()
+        .iter()
+        .map(|&m| template.atom_landmark(m))
+        .collect();
+    let params = DiceParams {
+        subdivision: stage.subdivision,
+        layers: stage.layers,
+    };
+    Ok(DiceAttachment::new(
+        template.boundary_triangles(),
+        &medial_of,
+        template.landmark_count(),
+        image,
+        params,
+    )?)
 }
 
 /// A volume from NIfTI (`.nii`, `.nii.gz`) or OpenEXR (`.exr`).
 pub fn read_volume(path: &Path) -> Result<medial_core::volume::Volume, CliError> {
-    let name = path.file_name().map(|n| n.to_string_lossy().to_lowercase()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_lowercase())
+        .unwrap_or_default();
     if name.ends_with(".exr") {
         Ok(medial_io::exr_volume::read_exr_volume(path)?)
     } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
         Ok(medial_io::nifti_volume::read_nifti(path)?)
     } else {
-        Err(medial_io::Error::format(path, "unknown image format: expected .nii, .nii.gz or .exr").into())
+        Err(
+            medial_io::Error::format(path, "unknown image format: expected .nii, .nii.gz or .exr")
+                .into(),
+        )
     }
 }

@@ -39,7 +39,13 @@ pub struct AlSchedule {
 
 impl Default for AlSchedule {
     fn default() -> Self {
-        Self { mu: 1.0, mu_factor: 10.0, mu_max: 1e6, iterations: 1, mu_update: MuUpdate::Always }
+        Self {
+            mu: 1.0,
+            mu_factor: 10.0,
+            mu_max: 1e6,
+            iterations: 1,
+            mu_update: MuUpdate::Always,
+        }
     }
 }
 
@@ -116,8 +122,19 @@ pub fn run_stage(
     mut progress: impl FnMut(&Progress<'_>),
 ) -> Result<StageOutcome> {
     let Some(constraints) = stage.constraints else {
-        let objective = Objective::new(stage.flow, stage.template, stage.attachment, stage.data_weight);
-        let min = minimize(&objective, start, options, |r| progress(&Progress { al_iteration: 0, mu: 0.0, report: r }))?;
+        let objective = Objective::new(
+            stage.flow,
+            stage.template,
+            stage.attachment,
+            stage.data_weight,
+        );
+        let min = minimize(&objective, start, options, |r| {
+            progress(&Progress {
+                al_iteration: 0,
+                mu: 0.0,
+                report: r,
+            })
+        })?;
         return Ok(StageOutcome {
             controls: min.controls,
             evaluation: min.evaluation,
@@ -132,15 +149,40 @@ pub fn run_stage(
     let mut lambda = vec![0.0; stage.flow.time_steps() * constraints.len()];
     let mut mu = schedule.mu;
     let mut controls = start;
-    let mut outcome =
-        StageOutcome { controls: Vec::new(), evaluation: Evaluation::default(), iterations: 0, evaluations: 0, al_iterations: 0, mu, stops: Vec::new() };
+    let mut outcome = StageOutcome {
+        controls: Vec::new(),
+        evaluation: Evaluation::default(),
+        iterations: 0,
+        evaluations: 0,
+        al_iterations: 0,
+        mu,
+        stops: Vec::new(),
+    };
     let mut previous_violation = f64::INFINITY;
     for al_iteration in 0..schedule.iterations {
-        let objective = Objective::new(stage.flow, stage.template, stage.attachment, stage.data_weight)
-            .with_penalty(Penalty { constraints, mu, lambda: &lambda })?;
-        let min = minimize(&objective, controls, options, |r| progress(&Progress { al_iteration, mu, report: r }))?;
+        let objective = Objective::new(
+            stage.flow,
+            stage.template,
+            stage.attachment,
+            stage.data_weight,
+        )
+        .with_penalty(Penalty {
+            constraints,
+            mu,
+            lambda: &lambda,
+        })?;
+        let min = minimize(&objective, controls, options, |r| {
+            progress(&Progress {
+                al_iteration,
+                mu,
+                report: r,
+            })
+        })?;
         let values = objective.constraint_values(&min.controls)?;
-        lambda.iter_mut().zip(&values).for_each(|(lam, c)| *lam -= mu * c);
+        lambda
+            .iter_mut()
+            .zip(&values)
+            .for_each(|(lam, c)| *lam -= mu * c);
         let violation = min.evaluation.max_abs_constraint;
         let grow = match schedule.mu_update {
             MuUpdate::Always => true,

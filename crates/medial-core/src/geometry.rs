@@ -18,7 +18,10 @@ impl TriMesh {
     /// Builds a mesh, refusing out-of-range or repeated corner indices and non-finite points.
     pub fn new(points: Vec<Vec3>, triangles: Vec<[usize; 3]>) -> Result<Self> {
         if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-            return Err(Error::NonFinite(format!("mesh point {i} is {:?}", points[i].as_slice())));
+            return Err(Error::NonFinite(format!(
+                "mesh point {i} is {:?}",
+                points[i].as_slice()
+            )));
         }
         for (t, tri) in triangles.iter().enumerate() {
             if let Some(&v) = tri.iter().find(|&&v| v >= points.len()) {
@@ -28,7 +31,9 @@ impl TriMesh {
                 )));
             }
             if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
-                return Err(Error::InvalidMesh(format!("triangle {t} repeats a corner: {tri:?}")));
+                return Err(Error::InvalidMesh(format!(
+                    "triangle {t} repeats a corner: {tri:?}"
+                )));
             }
         }
         Ok(Self { points, triangles })

@@ -21,8 +21,9 @@ pub fn objective(
 ) -> (f64, Vec<f64>) {
     let k = q0.len();
     let dt = 1.0 / steps as f64;
-    let controls: Vec<DMatrix<f64>> =
-        (0..steps).map(|n| DMatrix::from_row_slice(k, 3, &u[n * k * 3..(n + 1) * k * 3])).collect();
+    let controls: Vec<DMatrix<f64>> = (0..steps)
+        .map(|n| DMatrix::from_row_slice(k, 3, &u[n * k * 3..(n + 1) * k * 3]))
+        .collect();
     let mut qs = vec![DMatrix::from_fn(k, 3, |i, c| q0[i][c])];
     let mut kernels = Vec::with_capacity(steps);
     let mut kinetic = 0.0;
@@ -69,5 +70,7 @@ fn gaussian_matrix(q: &DMatrix<f64>, sigma: f64) -> DMatrix<f64> {
 }
 
 fn to_points(q: &DMatrix<f64>) -> Vec<Vec3> {
-    (0..q.nrows()).map(|i| Vec3::new(q[(i, 0)], q[(i, 1)], q[(i, 2)])).collect()
+    (0..q.nrows())
+        .map(|i| Vec3::new(q[(i, 0)], q[(i, 1)], q[(i, 2)]))
+        .collect()
 }

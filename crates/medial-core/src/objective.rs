@@ -75,15 +75,30 @@ pub struct Objective<'a> {
 
 impl<'a> Objective<'a> {
     /// `w_kin·KE + w_data·g`, without constraints.
-    pub fn new(flow: &'a Flow, template: &'a [Vec3], attachment: &'a dyn Attachment, data_weight: f64) -> Self {
-        Self { flow, template, attachment, data_weight, penalty: None }
+    pub fn new(
+        flow: &'a Flow,
+        template: &'a [Vec3],
+        attachment: &'a dyn Attachment,
+        data_weight: f64,
+    ) -> Self {
+        Self {
+            flow,
+            template,
+            attachment,
+            data_weight,
+            penalty: None,
+        }
     }
 
     /// Adds the augmented-Lagrangian penalty.
     pub fn with_penalty(mut self, penalty: Penalty<'a>) -> Result<Self> {
         let expected = self.flow.time_steps() * penalty.constraints.len();
         if penalty.lambda.len() != expected {
-            return Err(Error::ShapeMismatch { what: "multipliers (N·L)".into(), expected, found: penalty.lambda.len() });
+            return Err(Error::ShapeMismatch {
+                what: "multipliers (N·L)".into(),
+                expected,
+                found: penalty.lambda.len(),
+            });
         }
         self.penalty = Some(penalty);
         Ok(self)
@@ -110,11 +125,15 @@ impl<'a> Objective<'a> {
         let k = self.template.len();
         let q_final = trajectory.final_positions();
         let mut terminal = vec![Vec3::zeros(); k];
-        let data = self.attachment.evaluate(&q_final, grad.is_some().then_some(&mut terminal[..]))?;
+        let data = self
+            .attachment
+            .evaluate(&q_final, grad.is_some().then_some(&mut terminal[..]))?;
         terminal.iter_mut().for_each(|g| *g *= self.data_weight);
         let constraint_values = self.constraint_values_of(&trajectory);
         let (penalty, max_abs_constraint) = self.penalty_value(&constraint_values);
-        let total = self.flow.kinetic_weight() * trajectory.kinetic_energy() + self.data_weight * data.value + penalty;
+        let total = self.flow.kinetic_weight() * trajectory.kinetic_energy()
+            + self.data_weight * data.value
+            + penalty;
         if !total.is_finite() {
             return Err(Error::NonFinite(format!("objective is {total}")));
         }
@@ -147,7 +166,9 @@ impl<'a> Objective<'a> {
     }
 
     fn constraint_values_of(&self, trajectory: &Trajectory) -> Vec<f64> {
-        let Some(p) = &self.penalty else { return Vec::new() };
+        let Some(p) = &self.penalty else {
+            return Vec::new();
+        };
         let l = p.constraints.len();
         let mut values = vec![0.0; self.flow.time_steps() * l];
         for (n, out) in (1..).zip(values.chunks_exact_mut(l.max(1))) {
@@ -158,8 +179,14 @@ impl<'a> Objective<'a> {
 
     /// `(P, max |C|)`.
     fn penalty_value(&self, values: &[f64]) -> (f64, f64) {
-        let Some(p) = &self.penalty else { return (0.0, 0.0) };
-        let value = values.iter().zip(p.lambda).map(|(c, lam)| 0.5 * p.mu * c * c - lam * c).sum();
+        let Some(p) = &self.penalty else {
+            return (0.0, 0.0);
+        };
+        let value = values
+            .iter()
+            .zip(p.lambda)
+            .map(|(c, lam)| 0.5 * p.mu * c * c - lam * c)
+            .sum();
         (value, values.iter().fold(0.0f64, |m, c| m.max(c.abs())))
     }
 
@@ -168,8 +195,11 @@ impl<'a> Objective<'a> {
         let Some(p) = &self.penalty else { return };
         let l = p.constraints.len();
         let range = (n - 1) * l..n * l;
-        let weights: Vec<f64> =
-            values[range.clone()].iter().zip(&p.lambda[range]).map(|(c, lam)| p.mu * c - lam).collect();
+        let weights: Vec<f64> = values[range.clone()]
+            .iter()
+            .zip(&p.lambda[range])
+            .map(|(c, lam)| p.mu * c - lam)
+            .collect();
         p.constraints.accumulate_gradient(q, &weights, a);
     }
 }

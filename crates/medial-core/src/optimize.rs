@@ -29,7 +29,12 @@ pub struct LbfgsOptions {
 
 impl Default for LbfgsOptions {
     fn default() -> Self {
-        Self { max_iterations: 1000, memory: 10, gradient_tolerance: 1e-6, relative_decrease: 1e-9 }
+        Self {
+            max_iterations: 1000,
+            memory: 10,
+            gradient_tolerance: 1e-6,
+            relative_decrease: 1e-9,
+        }
     }
 }
 
@@ -111,8 +116,12 @@ pub fn minimize(
         .with_tolerance_grad(0.0)
         .and_then(|s| s.with_tolerance_cost(0.0))
         .map_err(|e| Error::Optimisation(e.to_string()))?;
-    let state = IterState::new().param(start).max_iters(options.max_iterations as u64);
-    let (mut state, _) = solver.init(&mut problem, state).map_err(|e| cached.error_or(e))?;
+    let state = IterState::new()
+        .param(start)
+        .max_iters(options.max_iterations as u64);
+    let (mut state, _) = solver
+        .init(&mut problem, state)
+        .map_err(|e| cached.error_or(e))?;
     state.update();
     let (first, grad0) = cached.current();
     report(&IterationReport {
@@ -131,12 +140,16 @@ pub fn minimize(
         if iteration >= options.max_iterations {
             break StopReason::MaxIterations;
         }
-        if let TerminationStatus::Terminated(reason) = Solver::<&Cached, _>::terminate_internal(&mut solver, &state) {
+        if let TerminationStatus::Terminated(reason) =
+            Solver::<&Cached, _>::terminate_internal(&mut solver, &state)
+        {
             if !matches!(reason, argmin::core::TerminationReason::MaxItersReached) {
                 break StopReason::LineSearch(reason.to_string());
             }
         }
-        let (next, _) = solver.next_iter(&mut problem, state).map_err(|e| cached.error_or(e))?;
+        let (next, _) = solver
+            .next_iter(&mut problem, state)
+            .map_err(|e| cached.error_or(e))?;
         state = next;
         state.update();
         if let TerminationStatus::Terminated(reason) = state.get_termination_status() {
@@ -144,7 +157,9 @@ pub fn minimize(
         }
         iteration += 1;
         state.increment_iter();
-        let param = state.get_param().ok_or_else(|| Error::Optimisation("L-BFGS lost its iterate".into()))?;
+        let param = state
+            .get_param()
+            .ok_or_else(|| Error::Optimisation("L-BFGS lost its iterate".into()))?;
         cached.ensure(param)?;
         let (evaluation, gradient_norm) = cached.current();
         report(&IterationReport {
@@ -163,10 +178,19 @@ pub fn minimize(
         }
         previous = evaluation.total;
     };
-    let controls = state.take_param().ok_or_else(|| Error::Optimisation("L-BFGS lost its iterate".into()))?;
+    let controls = state
+        .take_param()
+        .ok_or_else(|| Error::Optimisation("L-BFGS lost its iterate".into()))?;
     cached.ensure(&controls)?;
     let (evaluation, gradient_norm) = cached.current();
-    Ok(Minimum { controls, evaluation, gradient_norm, iterations: iteration, evaluations: cached.count(), stop })
+    Ok(Minimum {
+        controls,
+        evaluation,
+        gradient_norm,
+        iterations: iteration,
+        evaluations: cached.count(),
+        stop,
+    })
 }
 
 /// The objective with its last value and gradient remembered: argmin asks for the cost and the
@@ -187,11 +211,16 @@ struct Last {
 
 impl<'o, 'a> Cached<'o, 'a> {
     fn new(objective: &'o Objective<'a>) -> Self {
-        Self { objective, last: Mutex::new(Last::default()) }
+        Self {
+            objective,
+            last: Mutex::new(Last::default()),
+        }
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, Last> {
-        self.last.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+        self.last
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
     }
 
     /// Evaluates at `u` unless that is the remembered point.
@@ -219,7 +248,10 @@ impl<'o, 'a> Cached<'o, 'a> {
 
     fn current(&self) -> (Evaluation, f64) {
         let last = self.lock();
-        (last.evaluation.clone(), last.gradient.iter().map(|g| g * g).sum::<f64>().sqrt())
+        (
+            last.evaluation.clone(),
+            last.gradient.iter().map(|g| g * g).sum::<f64>().sqrt(),
+        )
     }
 
     fn count(&self) -> usize {
@@ -237,7 +269,8 @@ impl CostFunction for &Cached<'_, '_> {
     type Param = Vec<f64>;
     type Output = f64;
     fn cost(&self, u: &Vec<f64>) -> std::result::Result<f64, argmin::core::Error> {
-        self.ensure(u).map_err(|e| argmin::core::Error::msg(e.to_string()))?;
+        self.ensure(u)
+            .map_err(|e| argmin::core::Error::msg(e.to_string()))?;
         Ok(self.lock().evaluation.total)
     }
 }
@@ -246,7 +279,8 @@ impl Gradient for &Cached<'_, '_> {
     type Param = Vec<f64>;
     type Gradient = Vec<f64>;
     fn gradient(&self, u: &Vec<f64>) -> std::result::Result<Vec<f64>, argmin::core::Error> {
-        self.ensure(u).map_err(|e| argmin::core::Error::msg(e.to_string()))?;
+        self.ensure(u)
+            .map_err(|e| argmin::core::Error::msg(e.to_string()))?;
         Ok(self.lock().gradient.clone())
     }
 }

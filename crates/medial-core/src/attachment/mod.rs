@@ -27,6 +27,9 @@ impl Attachment for dice::DiceAttachment {
         if let Some(grad) = grad {
             grad.iter_mut().for_each(|g| *g = -*g);
         }
-        Ok(AttachmentValue { value: 1.0 - value.dice, dice: Some(value.dice) })
+        Ok(AttachmentValue {
+            value: 1.0 - value.dice,
+            dice: Some(value.dice),
+        })
     }
 }

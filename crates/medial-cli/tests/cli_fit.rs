@@ -1,0 +1,269 @@
+//! End-to-end tests of `medial fit` and `medial eval` through the built binary, on cmrep's own
+//! t001 medial template (k = 503), and of how bad input is refused.
+
+use medial_io::npy::read_npy;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data")
+        .join(name)
+}
+
+fn medial(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_medial"))
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A config fitting t001 to its own boundary moved by a rotation of 4° and a shift, so the
+/// exact answer is known (an affine map keeps a medial model medial).
+fn write_case(dir: &Path, stage_keys: &str) -> PathBuf {
+    let (c, s) = (4f64.to_radians().cos(), 4f64.to_radians().sin());
+    let matrix = format!("{c} {} 0 -3\n{s} {c} 0 2\n0 0 1 1\n0 0 0 1\n", -s);
+    std::fs::write(dir.join("move.txt"), matrix).unwrap();
+    let config = format!(
+        r#"
+[model]
+template = "{}"
+[flow]
+sigma = 6.0
+time_steps = 10
+[[stage]]
+name = "affine"
+attachment = "ssd"
+transform = "move.txt"
+{stage_keys}
+"#,
+        data("cmrep/t001_template_bcmrep.vtk").display()
+    );
+    let path = dir.join("fit.toml");
+    std::fs::write(&path, config).unwrap();
+    path
+}
+
+fn fit(config: &Path, out: &Path, threads: &str) -> Value {
+    let o = medial(&[
+        "fit",
+        config.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--threads",
+        threads,
+        "-q",
+    ]);
+    assert!(o.status.success(), "fit failed: {}", stderr(&o));
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn fit_writes_every_output_and_matches_an_affine_target() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_case(dir.path(), "constraints = false\nmax_iterations = 200");
+    let out = dir.path().join("out");
+    let summary = fit(&config, &out, "2");
+    assert_eq!(summary["landmarks"], 503);
+    assert_eq!(summary["time_steps"], 10);
+    assert_eq!(summary["threads"], 2);
+    let last = &summary["final"];
+    for key in [
+        "total",
+        "kinetic",
+        "data",
+        "penalty",
+        "max_abs_constraint",
+        "max_spoke_normal_deg",
+        "max_spoke_mismatch_pct",
+    ] {
+        assert!(last[key].is_number(), "final.{key} missing in {last}");
+    }
+    // The rigid move displaces points by 3.6 mm on average; the kinetic energy keeps the
+    // optimum a little short of an exact match.
+    let mean_distance = last["mean_distance"].as_f64().unwrap();
+    assert!(
+        mean_distance < 0.25,
+        "mean distance to the target {mean_distance} mm"
+    );
+    assert!(summary["stages"][0]["evaluations"].as_u64().unwrap() > 1);
+
+    let log = std::fs::read_to_string(out.join("log.csv")).unwrap();
+    let header = log.lines().next().unwrap();
+    assert!(header.starts_with("stage,al_iteration,iteration,evaluations,mu,total,kinetic,data,penalty,max_abs_constraint,max_spoke_normal_deg,max_spoke_mismatch_pct,grad_norm,seconds"));
+    assert!(log.lines().count() > 3);
+
+    let momenta = read_npy(&out.join("momenta.npy")).unwrap();
+    assert_eq!(momenta.shape, vec![10, 503, 3]);
+    for n in 0..=10 {
+        let boundary =
+            medial_io::vtk::read_polydata(&out.join(format!("flow/boundary_t{n:03}.vtk"))).unwrap();
+        assert_eq!(boundary.points.len(), 314);
+        for name in ["SpokeNormalAngle", "SpokeMismatch", "Radius", "MedialIndex"] {
+            assert!(
+                boundary.point_array(name).is_some(),
+                "{name} missing at t{n}"
+            );
+        }
+        let medial =
+            medial_io::vtk::read_polydata(&out.join(format!("flow/medial_t{n:03}.vtk"))).unwrap();
+        assert!(medial.point_array("Thickness").is_some());
+    }
+    let fitted = medial_io::cmrep::read_template(&out.join("fitted_template.vtk")).unwrap();
+    assert_eq!(fitted.landmark_count(), 503);
+    let metrics = medial_core::metrics::SpokeMetrics::compute(&fitted, fitted.landmarks());
+    let reported = last["max_spoke_normal_deg"].as_f64().unwrap();
+    assert!(
+        (metrics.max_spoke_normal_deg - reported).abs() < 1e-6,
+        "{} vs {reported}",
+        metrics.max_spoke_normal_deg
+    );
+}
+
+#[test]
+fn one_or_two_threads_give_the_same_bits_and_eval_reproduces_the_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = write_case(
+        dir.path(),
+        "constraints = true\nmu = 1.0\nal_iterations = 2\nmax_iterations = 15",
+    );
+    let (one, two) = (dir.path().join("one"), dir.path().join("two"));
+    let s1 = fit(&config, &one, "1");
+    let s2 = fit(&config, &two, "2");
+    assert_eq!(
+        std::fs::read(one.join("momenta.npy")).unwrap(),
+        std::fs::read(two.join("momenta.npy")).unwrap()
+    );
+    assert_eq!(s1["final"], s2["final"]);
+
+    let gradient = dir.path().join("g.npy");
+    let o = medial(&[
+        "eval",
+        config.to_str().unwrap(),
+        "--momenta",
+        one.join("momenta.npy").to_str().unwrap(),
+        "--gradient",
+        gradient.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let figures: Value = serde_json::from_slice(&o.stdout).unwrap();
+    // With λ = 0 and the stage's initial μ, eval gives the penalty function at the fitted
+    // controls: same kinetic energy and data term as the fit's final figures.
+    for key in [
+        "kinetic",
+        "data",
+        "max_abs_constraint",
+        "max_spoke_normal_deg",
+    ] {
+        let (a, b) = (
+            figures[key].as_f64().unwrap(),
+            s1["final"][key].as_f64().unwrap(),
+        );
+        assert!(
+            (a - b).abs() <= 1e-9 * b.abs().max(1.0),
+            "{key}: eval {a} vs fit {b}"
+        );
+    }
+    assert_eq!(read_npy(&gradient).unwrap().shape, vec![10, 503, 3]);
+}
+
+fn assert_refused(args: &[&str], expected: &str) {
+    let o = medial(args);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{args:?} should fail");
+    assert!(
+        err.contains(expected),
+        "{args:?}: message {err:?} should mention {expected:?}"
+    );
+    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+}
+
+#[test]
+fn bad_input_is_refused_with_a_clear_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    assert_refused(
+        &["fit", d.join("missing.toml").to_str().unwrap()],
+        "missing.toml",
+    );
+
+    let config = write_case(d, "max_iterations = 5");
+    let text = std::fs::read_to_string(&config).unwrap();
+    let typo = d.join("typo.toml");
+    std::fs::write(&typo, text.replace("sigma =", "sigam =")).unwrap();
+    assert_refused(&["fit", typo.to_str().unwrap()], "sigam");
+
+    let no_template = d.join("no_template.toml");
+    std::fs::write(
+        &no_template,
+        text.replace("t001_template_bcmrep.vtk", "nothing_here.vtk"),
+    )
+    .unwrap();
+    assert_refused(&["fit", no_template.to_str().unwrap()], "nothing_here.vtk");
+
+    let wrong_target = d.join("wrong_target.toml");
+    let hippo = data("keops/hippos_reduc_target.vtk");
+    std::fs::write(
+        &wrong_target,
+        text.replace(
+            "transform = \"move.txt\"",
+            &format!("target = \"{}\"", hippo.display()),
+        ),
+    )
+    .unwrap();
+    assert_refused(&["fit", wrong_target.to_str().unwrap()], "662 points");
+
+    let nan_mesh = d.join("nan.vtk");
+    std::fs::write(&nan_mesh, "# vtk DataFile Version 3.0\nx\nASCII\nDATASET POLYDATA\nPOINTS 3 float\n0 0 0 1 nan 0 0 1 0\nPOLYGONS 1 4\n3 0 1 2\n").unwrap();
+    let nan_config = d.join("nan.toml");
+    std::fs::write(
+        &nan_config,
+        text.replace(
+            &data("cmrep/t001_template_bcmrep.vtk").display().to_string(),
+            nan_mesh.to_str().unwrap(),
+        ),
+    )
+    .unwrap();
+    assert_refused(&["fit", nan_config.to_str().unwrap()], "nan.vtk");
+
+    let quad = d.join("quad.vtk");
+    std::fs::write(&quad, "# vtk DataFile Version 3.0\nx\nASCII\nDATASET POLYDATA\nPOINTS 4 float\n0 0 0 1 0 0 1 1 0 0 1 0\nPOLYGONS 1 5\n4 0 1 2 3\n").unwrap();
+    let quad_config = d.join("quad.toml");
+    std::fs::write(
+        &quad_config,
+        text.replace(
+            &data("cmrep/t001_template_bcmrep.vtk").display().to_string(),
+            quad.to_str().unwrap(),
+        ),
+    )
+    .unwrap();
+    assert_refused(&["fit", quad_config.to_str().unwrap()], "quad.vtk");
+
+    let bad_momenta = d.join("bad.npy");
+    medial_io::npy::write_npy(&bad_momenta, &[2, 3], &[0.0; 6]).unwrap();
+    assert_refused(
+        &[
+            "eval",
+            config.to_str().unwrap(),
+            "--momenta",
+            bad_momenta.to_str().unwrap(),
+        ],
+        "shape",
+    );
+    assert_refused(
+        &[
+            "eval",
+            config.to_str().unwrap(),
+            "--momenta",
+            bad_momenta.to_str().unwrap(),
+            "--stage",
+            "nope",
+        ],
+        "nope",
+    );
+}
