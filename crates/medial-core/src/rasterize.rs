@@ -25,7 +25,11 @@ pub fn rasterize(mesh: &TriMesh, dims: [usize; 3], voxel_to_world: Matrix4<f64>)
     check_closed(mesh.triangles())?;
     let empty = Volume::new(dims, vec![0.0; dims.iter().product()], voxel_to_world)?;
     let to_voxel = empty.world_to_voxel();
-    let points: Vec<Vec3> = mesh.points().iter().map(|p| (to_voxel * p.push(1.0)).xyz()).collect();
+    let points: Vec<Vec3> = mesh
+        .points()
+        .iter()
+        .map(|p| (to_voxel * p.push(1.0)).xyz())
+        .collect();
     let buckets = slice_buckets(&points, mesh.triangles(), dims[2]);
     let data: Vec<f64> = buckets
         .par_iter()
@@ -54,11 +58,13 @@ pub fn grid_around(
             "grid margin must be a finite number of mm ≥ 0, got {margin_mm}"
         )));
     }
-    let first = mesh
+    let first = mesh.points().first().ok_or_else(|| {
+        Error::InvalidMesh("cannot build a grid around a mesh without points".into())
+    })?;
+    let (lo, hi) = mesh
         .points()
-        .first()
-        .ok_or_else(|| Error::InvalidMesh("cannot build a grid around a mesh without points".into()))?;
-    let (lo, hi) = mesh.points().iter().fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
+        .iter()
+        .fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
     let extent = hi - lo + Vec3::repeat(2.0 * margin_mm);
     let steps = extent.map(|e| (e / spacing_mm).ceil());
     if steps.iter().any(|&s| s > 1e7) {
@@ -78,7 +84,9 @@ pub fn grid_around(
 /// Refuses a mesh without triangles or with an edge used by other than two triangles.
 fn check_closed(triangles: &[[usize; 3]]) -> Result<()> {
     if triangles.is_empty() {
-        return Err(Error::InvalidMesh("cannot rasterize a mesh without triangles".into()));
+        return Err(Error::InvalidMesh(
+            "cannot rasterize a mesh without triangles".into(),
+        ));
     }
     let mut uses: HashMap<(usize, usize), usize> = HashMap::new();
     for t in triangles {
@@ -112,8 +120,18 @@ fn slice_buckets(points: &[Vec3], triangles: &[[usize; 3]], nz: usize) -> Vec<Ve
 
 /// The grid indices `n ∈ [0, len)` with `min(values) ≤ n ≤ max(values)`.
 fn index_range(values: [f64; 3], len: usize) -> std::ops::Range<usize> {
-    let lo = values.iter().copied().fold(f64::INFINITY, f64::min).ceil().max(0.0);
-    let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max).floor() + 1.0;
+    let lo = values
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min)
+        .ceil()
+        .max(0.0);
+    let hi = values
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max)
+        .floor()
+        + 1.0;
     let hi = hi.clamp(0.0, len as f64);
     (lo as usize).min(hi as usize)..hi as usize
 }
@@ -148,7 +166,11 @@ fn rasterize_slice(
 fn fill_row(row: &mut [f64], sorted_crossings: &[f64]) {
     for pair in sorted_crossings.chunks(2) {
         let start = pair[0].max(-1.0).floor() + 1.0;
-        let end = pair.get(1).copied().unwrap_or(f64::INFINITY).min(row.len() as f64);
+        let end = pair
+            .get(1)
+            .copied()
+            .unwrap_or(f64::INFINITY)
+            .min(row.len() as f64);
         let mut i = start;
         while i < end {
             if i >= 0.0 {
@@ -170,8 +192,12 @@ fn line_crossing(points: &[Vec3], tri: [usize; 3], y: f64, z: f64) -> Option<f64
     // crossing stays within the triangle's x range even for a nearly edge-on triangle.
     let p = tri.map(|v| points[v]);
     let q = Vec3::new(0.0, y, z);
-    let weights = [orient_approx(&p[1], &p[2], &q), orient_approx(&p[2], &p[0], &q), orient_approx(&p[0], &p[1], &q)]
-        .map(|w| (w * f64::from(signs[0])).max(0.0));
+    let weights = [
+        orient_approx(&p[1], &p[2], &q),
+        orient_approx(&p[2], &p[0], &q),
+        orient_approx(&p[0], &p[1], &q),
+    ]
+    .map(|w| (w * f64::from(signs[0])).max(0.0));
     let total: f64 = weights.iter().sum();
     if total == 0.0 {
         return Some(p.iter().map(|p| p.x).sum::<f64>() / 3.0);
@@ -191,10 +217,18 @@ fn edge_side(points: &[Vec3], a: usize, b: usize, y: f64, z: f64) -> i8 {
         exact
     } else if q.z != p.z {
         // d/dε of orient = −(q.z − p.z).
-        if q.z < p.z { 1 } else { -1 }
+        if q.z < p.z {
+            1
+        } else {
+            -1
+        }
     } else if q.y != p.y {
         // d/dε² of orient = (q.y − p.y).
-        if q.y > p.y { 1 } else { -1 }
+        if q.y > p.y {
+            1
+        } else {
+            -1
+        }
     } else {
         0
     };
@@ -310,8 +344,14 @@ mod tests {
             c - Vec3::new(0.0, 0.0, r),
         ];
         let triangles = vec![
-            [0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4],
-            [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5],
+            [0, 2, 4],
+            [2, 1, 4],
+            [1, 3, 4],
+            [3, 0, 4],
+            [2, 0, 5],
+            [1, 2, 5],
+            [3, 1, 5],
+            [0, 3, 5],
         ];
         TriMesh::new(points, triangles).unwrap()
     }
@@ -351,7 +391,11 @@ mod tests {
     fn orientation_of_the_mesh_does_not_matter() {
         let mesh = octahedron(Vec3::new(2.2, 1.9, 2.05), 1.7);
         let (points, triangles) = mesh.clone().into_parts();
-        let flipped = TriMesh::new(points, triangles.iter().map(|t| [t[0], t[2], t[1]]).collect()).unwrap();
+        let flipped = TriMesh::new(
+            points,
+            triangles.iter().map(|t| [t[0], t[2], t[1]]).collect(),
+        )
+        .unwrap();
         let mut grid = Matrix4::new_scaling(0.25);
         grid[(3, 3)] = 1.0;
         let a = rasterize(&mesh, [20, 20, 20], grid).unwrap();
@@ -363,12 +407,19 @@ mod tests {
             let l1 = (p - Vec3::new(2.2, 1.9, 2.05)).abs().sum();
             if (l1 - 1.7).abs() > 1e-9 {
                 let expected = f64::from(u8::from(l1 < 1.7));
-                assert!(va == expected && vb == expected, "voxel {n}: |p − c|₁ = {l1}");
+                assert!(
+                    va == expected && vb == expected,
+                    "voxel {n}: |p − c|₁ = {l1}"
+                );
             }
         }
         // Volume of the octahedron: 4/3 r³.
         let exact = 4.0 / 3.0 * 1.7f64.powi(3);
-        assert!((a.integral() - exact).abs() < 0.1 * exact, "{} vs {exact}", a.integral());
+        assert!(
+            (a.integral() - exact).abs() < 0.1 * exact,
+            "{} vs {exact}",
+            a.integral()
+        );
     }
 
     #[test]
@@ -376,8 +427,13 @@ mod tests {
         let (points, mut triangles) = octahedron(Vec3::zeros(), 1.0).into_parts();
         triangles.pop();
         let open = TriMesh::new(points, triangles).unwrap();
-        let err = rasterize(&open, [4, 4, 4], Matrix4::identity()).unwrap_err().to_string();
-        assert!(err.contains("edge (0, 3)") && err.contains("3 such edges"), "{err}");
+        let err = rasterize(&open, [4, 4, 4], Matrix4::identity())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("edge (0, 3)") && err.contains("3 such edges"),
+            "{err}"
+        );
         let mesh = octahedron(Vec3::zeros(), 1.0);
         assert!(rasterize(&mesh, [4, 0, 4], Matrix4::identity()).is_err());
         assert!(grid_around(&mesh, 0.0, 1.0).is_err());

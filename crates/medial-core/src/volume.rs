@@ -33,7 +33,9 @@ impl Volume {
     /// column or `|det| < 1e-10 · Π |column|`).
     pub fn new(dims: [usize; 3], data: Vec<f64>, voxel_to_world: Matrix4<f64>) -> Result<Self> {
         if dims.contains(&0) {
-            return Err(Error::InvalidVolume(format!("empty grid: dimensions {dims:?}")));
+            return Err(Error::InvalidVolume(format!(
+                "empty grid: dimensions {dims:?}"
+            )));
         }
         let count = dims[0]
             .checked_mul(dims[1])
@@ -41,20 +43,32 @@ impl Volume {
             .ok_or_else(|| Error::InvalidVolume(format!("grid {dims:?} is too large")))?;
         if data.len() != count {
             return Err(Error::ShapeMismatch {
-                what: format!("voxel values of a {}×{}×{} volume", dims[0], dims[1], dims[2]),
+                what: format!(
+                    "voxel values of a {}×{}×{} volume",
+                    dims[0], dims[1], dims[2]
+                ),
                 expected: count,
                 found: data.len(),
             });
         }
         if let Some(n) = data.iter().position(|v| !v.is_finite()) {
-            let (i, j, k) = (n % dims[0], (n / dims[0]) % dims[1], n / (dims[0] * dims[1]));
+            let (i, j, k) = (
+                n % dims[0],
+                (n / dims[0]) % dims[1],
+                n / (dims[0] * dims[1]),
+            );
             return Err(Error::NonFinite(format!(
                 "voxel ({i}, {j}, {k}) has value {}",
                 data[n]
             )));
         }
         let world_to_voxel = check_affine(&voxel_to_world)?;
-        Ok(Self { dims, data, voxel_to_world, world_to_voxel })
+        Ok(Self {
+            dims,
+            data,
+            voxel_to_world,
+            world_to_voxel,
+        })
     }
 
     /// The grid size `[nx, ny, nz]`.
@@ -151,7 +165,10 @@ impl Volume {
         }
         let v = (self.world_to_voxel * p.push(1.0)).xyz();
         let (value, grad_voxel) = self.trilinear(&v);
-        (value, linear_part(&self.world_to_voxel).transpose() * grad_voxel)
+        (
+            value,
+            linear_part(&self.world_to_voxel).transpose() * grad_voxel,
+        )
     }
 
     /// `∫ f = Σ values × voxel volume` (mm³ for a mask).
@@ -189,9 +206,24 @@ impl Volume {
             let (sy, sz) = (nx as usize, (nx * ny) as usize);
             let o = (i + nx * (j + ny * k)) as usize;
             let d = &self.data;
-            [d[o], d[o + 1], d[o + sy], d[o + sy + 1], d[o + sz], d[o + sz + 1], d[o + sz + sy], d[o + sz + sy + 1]]
+            [
+                d[o],
+                d[o + 1],
+                d[o + sy],
+                d[o + sy + 1],
+                d[o + sz],
+                d[o + sz + 1],
+                d[o + sz + sy],
+                d[o + sz + sy + 1],
+            ]
         } else {
-            std::array::from_fn(|n| self.at(i + (n & 1) as i64, j + ((n >> 1) & 1) as i64, k + ((n >> 2) & 1) as i64))
+            std::array::from_fn(|n| {
+                self.at(
+                    i + (n & 1) as i64,
+                    j + ((n >> 1) & 1) as i64,
+                    k + ((n >> 2) & 1) as i64,
+                )
+            })
         }
     }
 
@@ -280,24 +312,33 @@ fn convolve_axis(input: &[f64], dims: [usize; 3], axis: usize, kernel: &[f64]) -
         }
     };
     match axis {
-        0 => out.par_chunks_mut(nx).zip(input.par_chunks(nx)).for_each(|(row, src)| {
-            taps(nx, &mut |i, s, w| row[i] += w * src[s]);
-        }),
-        1 => out.par_chunks_mut(nx * ny).zip(input.par_chunks(nx * ny)).for_each(|(dst, src)| {
-            taps(ny, &mut |j, s, w| {
-                let (d, s) = (&mut dst[j * nx..(j + 1) * nx], &src[s * nx..(s + 1) * nx]);
-                d.iter_mut().zip(s).for_each(|(d, s)| *d += w * s);
-            });
-        }),
-        _ => out.par_chunks_mut(nx * ny).enumerate().for_each(|(k, dst)| {
-            for (tap, &w) in kernel.iter().enumerate() {
-                let src = k as i64 - (tap as i64 - radius);
-                if (0..nz as i64).contains(&src) {
-                    let s = &input[src as usize * nx * ny..(src as usize + 1) * nx * ny];
-                    dst.iter_mut().zip(s).for_each(|(d, s)| *d += w * s);
+        0 => out
+            .par_chunks_mut(nx)
+            .zip(input.par_chunks(nx))
+            .for_each(|(row, src)| {
+                taps(nx, &mut |i, s, w| row[i] += w * src[s]);
+            }),
+        1 => out
+            .par_chunks_mut(nx * ny)
+            .zip(input.par_chunks(nx * ny))
+            .for_each(|(dst, src)| {
+                taps(ny, &mut |j, s, w| {
+                    let (d, s) = (&mut dst[j * nx..(j + 1) * nx], &src[s * nx..(s + 1) * nx]);
+                    d.iter_mut().zip(s).for_each(|(d, s)| *d += w * s);
+                });
+            }),
+        _ => out
+            .par_chunks_mut(nx * ny)
+            .enumerate()
+            .for_each(|(k, dst)| {
+                for (tap, &w) in kernel.iter().enumerate() {
+                    let src = k as i64 - (tap as i64 - radius);
+                    if (0..nz as i64).contains(&src) {
+                        let s = &input[src as usize * nx * ny..(src as usize + 1) * nx * ny];
+                        dst.iter_mut().zip(s).for_each(|(d, s)| *d += w * s);
+                    }
                 }
-            }
-        }),
+            }),
     }
     out
 }
@@ -311,7 +352,8 @@ mod tests {
         let a = r.matrix() * Matrix3::from_diagonal(&Vec3::new(0.8, 1.1, 1.5));
         let mut m = Matrix4::identity();
         m.fixed_view_mut::<3, 3>(0, 0).copy_from(&a);
-        m.fixed_view_mut::<3, 1>(0, 3).copy_from(&Vec3::new(-4.0, 2.0, 7.5));
+        m.fixed_view_mut::<3, 1>(0, 3)
+            .copy_from(&Vec3::new(-4.0, 2.0, 7.5));
         m
     }
 
@@ -319,7 +361,9 @@ mod tests {
         let mut state = seed;
         let data = (0..dims.iter().product())
             .map(|_| {
-                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
                 (state >> 11) as f64 / (1u64 << 53) as f64
             })
             .collect();
@@ -337,13 +381,21 @@ mod tests {
         assert!(err.contains("(1, 0, 1)"), "{err}");
         let mut flat = m;
         flat[(1, 1)] = 0.0;
-        assert!(Volume::new([2, 2, 2], vec![0.0; 8], flat).unwrap_err().to_string().contains("zero column 1"));
+        assert!(Volume::new([2, 2, 2], vec![0.0; 8], flat)
+            .unwrap_err()
+            .to_string()
+            .contains("zero column 1"));
         let mut coplanar = m;
-        coplanar.fixed_view_mut::<3, 1>(0, 2).copy_from(&Vec3::new(1.0, 1.0, 0.0));
+        coplanar
+            .fixed_view_mut::<3, 1>(0, 2)
+            .copy_from(&Vec3::new(1.0, 1.0, 0.0));
         assert!(Volume::new([2, 2, 2], vec![0.0; 8], coplanar).is_err());
         let mut projective = m;
         projective[(3, 0)] = 0.1;
-        assert!(Volume::new([2, 2, 2], vec![0.0; 8], projective).unwrap_err().to_string().contains("last row"));
+        assert!(Volume::new([2, 2, 2], vec![0.0; 8], projective)
+            .unwrap_err()
+            .to_string()
+            .contains("last row"));
         assert!(random_volume([3, 3, 3], 1).smoothed(-1.0).is_err());
         assert!(random_volume([3, 3, 3], 1).smoothed(f64::NAN).is_err());
     }
@@ -378,7 +430,12 @@ mod tests {
         };
         for _ in 0..200 {
             // Points inside and just outside the grid (the zero-padded band).
-            let idx = Vector4::new(next() * 5.0 - 1.0, next() * 6.0 - 1.0, next() * 7.0 - 1.0, 1.0);
+            let idx = Vector4::new(
+                next() * 5.0 - 1.0,
+                next() * 6.0 - 1.0,
+                next() * 7.0 - 1.0,
+                1.0,
+            );
             let p = (v.voxel_to_world() * idx).xyz();
             let (f, g) = v.sample_with_gradient(&p);
             assert_eq!(f, v.sample(&p));
@@ -386,7 +443,11 @@ mod tests {
             for a in 0..3 {
                 let e = Vec3::ith(a, h);
                 let fd = (v.sample(&(p + e)) - v.sample(&(p - e))) / (2.0 * h);
-                assert!((fd - g[a]).abs() < 1e-6 * (1.0 + g.norm()), "axis {a}: {fd} vs {}", g[a]);
+                assert!(
+                    (fd - g[a]).abs() < 1e-6 * (1.0 + g.norm()),
+                    "axis {a}: {fd} vs {}",
+                    g[a]
+                );
             }
         }
     }

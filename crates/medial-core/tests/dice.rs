@@ -33,17 +33,32 @@ impl Model {
     }
 
     fn attachment(&self, image: Volume, params: DiceParams) -> DiceAttachment {
-        DiceAttachment::new(&self.triangles, &self.medial_of, self.q.len(), image, params).unwrap()
+        DiceAttachment::new(
+            &self.triangles,
+            &self.medial_of,
+            self.q.len(),
+            image,
+            params,
+        )
+        .unwrap()
     }
 
     /// Volume enclosed by the boundary mesh at landmark positions `q` (divergence theorem).
     fn enclosed_volume(&self, q: &[Vec3]) -> f64 {
-        self.triangles.iter().map(|&[a, b, c]| q[a].dot(&q[b].cross(&q[c]))).sum::<f64>() / 6.0
+        self.triangles
+            .iter()
+            .map(|&[a, b, c]| q[a].dot(&q[b].cross(&q[c])))
+            .sum::<f64>()
+            / 6.0
     }
 
     /// Σ |p·(q×r)|/6 over the boundary triangles: the scale of the rounding in the volume.
     fn volume_scale(&self, q: &[Vec3]) -> f64 {
-        self.triangles.iter().map(|&[a, b, c]| q[a].dot(&q[b].cross(&q[c])).abs()).sum::<f64>() / 6.0
+        self.triangles
+            .iter()
+            .map(|&[a, b, c]| q[a].dot(&q[b].cross(&q[c])).abs())
+            .sum::<f64>()
+            / 6.0
     }
 
     fn translated(&self, shift: Vec3) -> Vec<Vec3> {
@@ -60,7 +75,8 @@ fn disc_sheet(rings: usize, radius: f64) -> (Vec<Vec3>, Vec<[usize; 3]>, Vec<usi
         let n = 6 * r;
         for j in 0..n {
             let angle = std::f64::consts::TAU * j as f64 / n as f64;
-            points.push(radius * r as f64 / rings as f64 * Vec3::new(angle.cos(), angle.sin(), 0.0));
+            points
+                .push(radius * r as f64 / rings as f64 * Vec3::new(angle.cos(), angle.sin(), 0.0));
         }
     }
     let mut triangles = Vec::new();
@@ -93,7 +109,13 @@ fn thick_disc(rings: usize, radius: f64, half: f64) -> Model {
     let interior = rim[0];
     let na = medial.len();
     let nb = 2 * interior + rim.len();
-    let top = |a: usize| if a < interior { a } else { 2 * interior + (a - interior) };
+    let top = |a: usize| {
+        if a < interior {
+            a
+        } else {
+            2 * interior + (a - interior)
+        }
+    };
     let bottom = |a: usize| if a < interior { interior + a } else { top(a) };
     let mut q = vec![Vec3::zeros(); nb + na];
     let mut medial_of = vec![0; nb];
@@ -113,7 +135,11 @@ fn thick_disc(rings: usize, radius: f64, half: f64) -> Model {
         triangles.push([top(a), top(b), top(c)]);
         triangles.push([bottom(a), bottom(c), bottom(b)]);
     }
-    Model { q, triangles, medial_of }
+    Model {
+        q,
+        triangles,
+        medial_of,
+    }
 }
 
 /// Token-level reader of the few legacy VTK files used here (ASCII, 4.x or 5.1 cell layout).
@@ -126,17 +152,27 @@ impl VtkTokens {
     }
 
     fn after(&self, keyword: &str) -> usize {
-        self.0.iter().position(|t| t == keyword).unwrap_or_else(|| panic!("no {keyword}")) + 1
+        self.0
+            .iter()
+            .position(|t| t == keyword)
+            .unwrap_or_else(|| panic!("no {keyword}"))
+            + 1
     }
 
     fn numbers(&self, start: usize, count: usize) -> Vec<f64> {
-        self.0[start..start + count].iter().map(|t| t.parse().unwrap()).collect()
+        self.0[start..start + count]
+            .iter()
+            .map(|t| t.parse().unwrap())
+            .collect()
     }
 
     fn points(&self) -> Vec<Vec3> {
         let at = self.after("POINTS");
         let n: usize = self.0[at].parse().unwrap();
-        self.numbers(at + 2, 3 * n).chunks(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect()
+        self.numbers(at + 2, 3 * n)
+            .chunks(3)
+            .map(|c| Vec3::new(c[0], c[1], c[2]))
+            .collect()
     }
 
     fn triangles(&self) -> Vec<[usize; 3]> {
@@ -145,13 +181,26 @@ impl VtkTokens {
         let cells: Vec<Vec<usize>> = if self.0[at + 2] == "OFFSETS" {
             let offsets = self.numbers(at + 4, a);
             let conn = self.numbers(at + 4 + a + 2, b);
-            offsets.windows(2).map(|w| conn[w[0] as usize..w[1] as usize].iter().map(|&v| v as usize).collect()).collect()
+            offsets
+                .windows(2)
+                .map(|w| {
+                    conn[w[0] as usize..w[1] as usize]
+                        .iter()
+                        .map(|&v| v as usize)
+                        .collect()
+                })
+                .collect()
         } else {
             let mut cells = Vec::new();
             let mut i = at + 2;
             for _ in 0..a {
                 let n: usize = self.0[i].parse().unwrap();
-                cells.push(self.numbers(i + 1, n).into_iter().map(|v| v as usize).collect());
+                cells.push(
+                    self.numbers(i + 1, n)
+                        .into_iter()
+                        .map(|v| v as usize)
+                        .collect(),
+                );
                 i += n + 1;
             }
             cells
@@ -162,7 +211,11 @@ impl VtkTokens {
     fn array(&self, name: &str, components: usize, n: usize) -> Vec<f64> {
         let at = self.after(name);
         // `FIELD` arrays: name ncomp ntuples type; `NORMALS`: name type.
-        let start = if self.0[at] == components.to_string() { at + 3 } else { at + 1 };
+        let start = if self.0[at] == components.to_string() {
+            at + 3
+        } else {
+            at + 1
+        };
         self.numbers(start, components * n)
     }
 }
@@ -173,7 +226,11 @@ fn t001() -> Model {
     let vtk = VtkTokens::read("t001_template_bcmrep.vtk");
     let boundary = vtk.points();
     let nb = boundary.len();
-    let atom: Vec<usize> = vtk.array("MedialIndex", 1, nb).iter().map(|&m| m as usize).collect();
+    let atom: Vec<usize> = vtk
+        .array("MedialIndex", 1, nb)
+        .iter()
+        .map(|&m| m as usize)
+        .collect();
     let radius = vtk.array("Radius", 1, nb);
     let normals = vtk.array("normals", 3, nb);
     let na = atom.iter().max().unwrap() + 1;
@@ -183,7 +240,11 @@ fn t001() -> Model {
         let n = Vec3::new(normals[3 * b], normals[3 * b + 1], normals[3 * b + 2]);
         q[nb + atom[b]] = boundary[b] - radius[b] * n;
     }
-    Model { q, triangles: vtk.triangles(), medial_of: atom.iter().map(|a| nb + a).collect() }
+    Model {
+        q,
+        triangles: vtk.triangles(),
+        medial_of: atom.iter().map(|a| nb + a).collect(),
+    }
 }
 
 /// The binary rasterization of a boundary on the grid of `like`.
@@ -199,7 +260,9 @@ fn voxel_dice(a: &Volume, f: &Volume) -> f64 {
 
 fn perturbed(q: &[Vec3], amplitude: f64, seed: u64) -> Vec<Vec3> {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    q.iter().map(|p| p + amplitude * Vec3::from_fn(|_, _| rng.gen_range(-1.0..1.0))).collect()
+    q.iter()
+        .map(|p| p + amplitude * Vec3::from_fn(|_, _| rng.gen_range(-1.0..1.0)))
+        .collect()
 }
 
 fn unit_image() -> Volume {
@@ -214,7 +277,11 @@ fn the_thick_disc_is_a_valid_closed_model() {
     let expected = disc.enclosed_volume(&disc.q);
     assert!(expected > 0.0);
     let v = dice.evaluate(&disc.q, None).unwrap();
-    assert!((v.model_volume - expected).abs() < 1e-9 * expected, "{} vs {expected}", v.model_volume);
+    assert!(
+        (v.model_volume - expected).abs() < 1e-9 * expected,
+        "{} vs {expected}",
+        v.model_volume
+    );
     assert_eq!(v.negative_volume, 0.0);
 }
 
@@ -250,14 +317,24 @@ fn prisms_tile_the_real_template_under_perturbations() {
         let v = dice.evaluate(&q, None).unwrap();
         let expected = model.enclosed_volume(&q);
         let error = (v.model_volume - expected).abs() / model.volume_scale(&q);
-        assert!(error < 1e-12, "amplitude {amplitude}: {} vs {expected} ({error:e})", v.model_volume);
+        assert!(
+            error < 1e-12,
+            "amplitude {amplitude}: {} vs {expected} ({error:e})",
+            v.model_volume
+        );
         if amplitude == 0.0 {
-            println!("t001: V = {:.2} mm³, negative {:.3e} mm³", v.model_volume, v.negative_volume);
+            println!(
+                "t001: V = {:.2} mm³, negative {:.3e} mm³",
+                v.model_volume, v.negative_volume
+            );
             assert!(v.negative_volume > -1e-3 * v.model_volume);
         }
     }
     let folded = dice.evaluate(&perturbed(&model.q, 30.0, 4), None).unwrap();
-    assert!(folded.negative_volume < 0.0, "a scrambled model must report negative volume");
+    assert!(
+        folded.negative_volume < 0.0,
+        "a scrambled model must report negative volume"
+    );
 }
 
 /// (a) Against a smooth image (σ = 1 mm, 2 voxels) the attachment's Dice matches the voxel
@@ -268,13 +345,28 @@ fn dice_matches_the_voxel_overlap_of_the_rasterized_model() {
     let disc = thick_disc(5, 10.0, 4.0);
     let target = disc.boundary(&disc.translated(Vec3::new(1.5, -1.0, 0.8)));
     let (dims, grid) = grid_around(&target, 0.5, 6.0).unwrap();
-    let image = rasterize(&target, dims, grid).unwrap().smoothed(1.0).unwrap();
+    let image = rasterize(&target, dims, grid)
+        .unwrap()
+        .smoothed(1.0)
+        .unwrap();
     let reference = voxel_dice(&mask_on(&disc.boundary(&disc.q), &image), &image);
     let image_volume = image.integral();
     let mut errors = Vec::new();
-    for params in [DiceParams::default(), DiceParams { subdivision: 3, layers: 20 }] {
-        let v = disc.attachment(image.clone(), params).evaluate(&disc.q, None).unwrap();
-        println!("{params:?}: attachment Dice {:.4}, voxel Dice {reference:.4}", v.dice);
+    for params in [
+        DiceParams::default(),
+        DiceParams {
+            subdivision: 3,
+            layers: 20,
+        },
+    ] {
+        let v = disc
+            .attachment(image.clone(), params)
+            .evaluate(&disc.q, None)
+            .unwrap();
+        println!(
+            "{params:?}: attachment Dice {:.4}, voxel Dice {reference:.4}",
+            v.dice
+        );
         assert_eq!(v.image_volume, image_volume);
         errors.push((v.dice - reference).abs());
     }
@@ -291,16 +383,34 @@ fn a_model_matches_its_own_rasterization() {
     let disc = thick_disc(6, 24.0, 12.0);
     let boundary = disc.boundary(&disc.q);
     let (dims, grid) = grid_around(&boundary, 0.5, 3.0).unwrap();
-    let image = rasterize(&boundary, dims, grid).unwrap().smoothed(0.2).unwrap();
+    let image = rasterize(&boundary, dims, grid)
+        .unwrap()
+        .smoothed(0.2)
+        .unwrap();
     let mut dice = Vec::new();
     for (subdivision, layers) in [(2, 5), (2, 20), (3, 40)] {
-        let params = DiceParams { subdivision, layers };
-        let v = disc.attachment(image.clone(), params).evaluate(&disc.q, None).unwrap();
-        println!("fat disc vs itself, {params:?}: Dice {:.4} (V {:.0}, V_img {:.0})", v.dice, v.model_volume, v.image_volume);
-        assert!((v.model_volume / v.image_volume - 1.0).abs() < 0.005, "{v:?}");
+        let params = DiceParams {
+            subdivision,
+            layers,
+        };
+        let v = disc
+            .attachment(image.clone(), params)
+            .evaluate(&disc.q, None)
+            .unwrap();
+        println!(
+            "fat disc vs itself, {params:?}: Dice {:.4} (V {:.0}, V_img {:.0})",
+            v.dice, v.model_volume, v.image_volume
+        );
+        assert!(
+            (v.model_volume / v.image_volume - 1.0).abs() < 0.005,
+            "{v:?}"
+        );
         dice.push(v.dice);
     }
-    assert!(dice[0] >= 0.92 && dice[0] < dice[1] && dice[1] < dice[2], "{dice:?}");
+    assert!(
+        dice[0] >= 0.92 && dice[0] < dice[1] && dice[1] < dice[2],
+        "{dice:?}"
+    );
     assert!(dice[2] >= 0.98, "{dice:?}");
 }
 
@@ -323,7 +433,10 @@ fn the_real_template_against_its_own_rasterization() {
     // Shortest of repeated runs (robust to a loaded machine): CPU time of the one worker
     // thread with 1 thread, wall time with 2.
     for threads in [1, 2] {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         let with_grad = best_time(&pool, || {
             dice.evaluate(&model.q, Some(&mut grad)).unwrap();
         });
@@ -372,7 +485,10 @@ fn gradient_case() -> (Model, DiceAttachment, Vec<Vec3>) {
     let disc = thick_disc(3, 6.0, 2.5);
     let target = disc.boundary(&disc.translated(Vec3::new(1.2, 0.7, -0.9)));
     let (dims, grid) = grid_around(&target, 0.5, 4.0).unwrap();
-    let image = rasterize(&target, dims, grid).unwrap().smoothed(1.0).unwrap();
+    let image = rasterize(&target, dims, grid)
+        .unwrap()
+        .smoothed(1.0)
+        .unwrap();
     let dice = disc.attachment(image, DiceParams::default());
     let q = perturbed(&disc.q, 0.3, 11);
     (disc, dice, q)
@@ -397,12 +513,27 @@ fn gradient_matches_central_differences() {
         }
     }
     let norm = grad.iter().map(|g| g.norm_squared()).sum::<f64>().sqrt();
-    let error = grad.iter().zip(&fd).map(|(g, f)| (g - f).norm_squared()).sum::<f64>().sqrt();
-    let worst = grad.iter().zip(&fd).map(|(g, f)| (g - f).amax()).fold(0.0, f64::max);
-    println!("gradient: |g| = {norm:.4e}, |g − fd| / |g| = {:.2e}, worst component {worst:.2e}", error / norm);
+    let error = grad
+        .iter()
+        .zip(&fd)
+        .map(|(g, f)| (g - f).norm_squared())
+        .sum::<f64>()
+        .sqrt();
+    let worst = grad
+        .iter()
+        .zip(&fd)
+        .map(|(g, f)| (g - f).amax())
+        .fold(0.0, f64::max);
+    println!(
+        "gradient: |g| = {norm:.4e}, |g − fd| / |g| = {:.2e}, worst component {worst:.2e}",
+        error / norm
+    );
     assert!(error <= 1e-5 * norm);
     for (i, (g, f)) in grad.iter().zip(&fd).enumerate() {
-        assert!((g - f).amax() <= 1e-5 * norm + 1e-4 * g.amax(), "landmark {i}: {g:?} vs {f:?}");
+        assert!(
+            (g - f).amax() <= 1e-5 * norm + 1e-4 * g.amax(),
+            "landmark {i}: {g:?} vs {f:?}"
+        );
     }
 }
 
@@ -411,7 +542,10 @@ fn gradient_matches_central_differences() {
 fn evaluation_is_identical_across_thread_counts() {
     let (_, dice, q) = gradient_case();
     let run = |threads: usize| -> (DiceValue, Vec<Vec3>) {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         pool.install(|| {
             let mut grad = vec![Vec3::zeros(); q.len()];
             let v = dice.evaluate(&q, Some(&mut grad)).unwrap();
@@ -435,11 +569,18 @@ fn bad_models_and_inputs_are_refused() {
     let disc = thick_disc(2, 4.0, 1.0);
     let k = disc.q.len();
     let new = |tris: &[[usize; 3]], medial_of: &[usize], params| {
-        DiceAttachment::new(tris, medial_of, k, unit_image(), params).map(|_| ()).unwrap_err().to_string()
+        DiceAttachment::new(tris, medial_of, k, unit_image(), params)
+            .map(|_| ())
+            .unwrap_err()
+            .to_string()
     };
     let p = DiceParams::default();
     let open = &disc.triangles[1..];
-    assert!(new(open, &disc.medial_of, p).contains("open"), "{}", new(open, &disc.medial_of, p));
+    assert!(
+        new(open, &disc.medial_of, p).contains("open"),
+        "{}",
+        new(open, &disc.medial_of, p)
+    );
     let mut flipped = disc.triangles.clone();
     flipped[0] = [flipped[0][0], flipped[0][2], flipped[0][1]];
     assert!(new(&flipped, &disc.medial_of, p).contains("directed edge"));
@@ -449,8 +590,24 @@ fn bad_models_and_inputs_are_refused() {
     assert!(new(&disc.triangles, &medial_of, p).contains("not covered"));
     medial_of[0] = 0;
     assert!(new(&disc.triangles, &medial_of, p).contains("outside the medial landmarks"));
-    assert!(new(&disc.triangles, &disc.medial_of, DiceParams { subdivision: 2, layers: 0 }).contains("layers"));
-    assert!(new(&disc.triangles, &disc.medial_of, DiceParams { subdivision: 40, layers: 5 }).contains("prisms"));
+    assert!(new(
+        &disc.triangles,
+        &disc.medial_of,
+        DiceParams {
+            subdivision: 2,
+            layers: 0
+        }
+    )
+    .contains("layers"));
+    assert!(new(
+        &disc.triangles,
+        &disc.medial_of,
+        DiceParams {
+            subdivision: 40,
+            layers: 5
+        }
+    )
+    .contains("prisms"));
     let empty = Volume::new([2, 2, 2], vec![0.0; 8], nalgebra::Matrix4::identity()).unwrap();
     let err = DiceAttachment::new(&disc.triangles, &disc.medial_of, k, empty, p).unwrap_err();
     assert!(err.to_string().contains("no foreground"));
@@ -468,9 +625,12 @@ fn bad_models_and_inputs_are_refused() {
 fn rasterized_sphere_has_the_enclosed_volume() {
     let vtk = VtkTokens::read("shooting_test_3d_sphere.vtk");
     let mesh = TriMesh::new(vtk.points(), vtk.triangles()).unwrap();
-    let enclosed: f64 =
-        mesh.triangles().iter().map(|&[a, b, c]| mesh.points()[a].dot(&mesh.points()[b].cross(&mesh.points()[c]))).sum::<f64>()
-            / 6.0;
+    let enclosed: f64 = mesh
+        .triangles()
+        .iter()
+        .map(|&[a, b, c]| mesh.points()[a].dot(&mesh.points()[b].cross(&mesh.points()[c])))
+        .sum::<f64>()
+        / 6.0;
     for spacing in [0.02, 0.01] {
         let (dims, grid) = grid_around(&mesh, spacing, 0.05).unwrap();
         let start = Instant::now();
@@ -482,4 +642,33 @@ fn rasterized_sphere_has_the_enclosed_volume() {
         );
         assert!((volume / enclosed - 1.0).abs() < 0.02);
     }
+}
+
+/// The attachment built from `medial_io::cmrep::read_template` (the path the CLI takes) sees
+/// the same model as the test's own reader.
+#[test]
+fn attachment_from_the_cmrep_reader() {
+    let path = std::path::Path::new(DATA).join("t001_template_bcmrep.vtk");
+    let template = medial_io::cmrep::read_template(&path).unwrap();
+    let medial_of: Vec<usize> = template
+        .medial_index()
+        .iter()
+        .map(|&m| template.atom_landmark(m))
+        .collect();
+    let dice = DiceAttachment::new(
+        template.boundary_triangles(),
+        &medial_of,
+        template.landmark_count(),
+        unit_image(),
+        DiceParams::default(),
+    )
+    .unwrap();
+    let ours = t001();
+    assert_eq!(template.landmark_count(), ours.q.len());
+    let theirs = dice.evaluate(template.landmarks(), None).unwrap();
+    let mine = ours
+        .attachment(unit_image(), DiceParams::default())
+        .evaluate(&ours.q, None)
+        .unwrap();
+    assert!((theirs.model_volume - mine.model_volume).abs() < 1e-6 * mine.model_volume);
 }

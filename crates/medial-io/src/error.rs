@@ -37,16 +37,25 @@ pub type Result<T, E = Error> = std::result::Result<T, E>;
 impl Error {
     /// A format error for `path`.
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
-        Error::Format { path: path.into(), message: message.into() }
+        Error::Format {
+            path: path.into(),
+            message: message.into(),
+        }
     }
 
     /// An I/O error for `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Error::Io { path: path.into(), source }
+        Error::Io {
+            path: path.into(),
+            source,
+        }
     }
 
     /// An engine error about the content of `path`.
     pub fn model(path: impl Into<PathBuf>, source: medial_core::Error) -> Self {
-        Error::Model { path: path.into(), source }
+        Error::Model {
+            path: path.into(),
+            source,
+        }
     }
 }

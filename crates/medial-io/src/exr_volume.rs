@@ -55,7 +55,12 @@ pub fn read_exr_volume(path: &Path) -> Result<Volume> {
     let channel = match channels.iter().find(|c| c.name.to_string() == CHANNEL) {
         Some(c) => c,
         None if channels.len() == 1 => &channels[0],
-        None => return Err(Error::format(path, format!("{} channels and none named {CHANNEL}", channels.len()))),
+        None => {
+            return Err(Error::format(
+                path,
+                format!("{} channels and none named {CHANNEL}", channels.len()),
+            ))
+        }
     };
     let data: Vec<f64> = match &channel.sample_data {
         FlatSamples::F16(v) => v.iter().map(|x| x.to_f64()).collect(),
@@ -73,12 +78,24 @@ pub fn read_exr_volume(path: &Path) -> Result<Volume> {
             }
             dims
         }
-        Some(other) => return Err(Error::format(path, format!("{DIMS_ATTRIBUTE} is {other:?}, not a v3i"))),
+        Some(other) => {
+            return Err(Error::format(
+                path,
+                format!("{DIMS_ATTRIBUTE} is {other:?}, not a v3i"),
+            ))
+        }
         None => [width, height, 1],
     };
     let affine = match attribute(AFFINE_ATTRIBUTE) {
-        Some(AttributeValue::Text(text)) => parse_affine(&text.to_string()).map_err(|m| Error::format(path, m))?,
-        Some(other) => return Err(Error::format(path, format!("{AFFINE_ATTRIBUTE} is {other:?}, not a string"))),
+        Some(AttributeValue::Text(text)) => {
+            parse_affine(&text.to_string()).map_err(|m| Error::format(path, m))?
+        }
+        Some(other) => {
+            return Err(Error::format(
+                path,
+                format!("{AFFINE_ATTRIBUTE} is {other:?}, not a string"),
+            ))
+        }
         None => Matrix4::identity(),
     };
     Volume::new(dims, data, affine).map_err(|e| Error::model(path, e))
@@ -92,29 +109,55 @@ pub fn write_exr_volume(path: &Path, volume: &Volume) -> Result<()> {
     let [nx, ny, nz] = volume.dims();
     let too_large = |n: usize| i32::try_from(n).is_err();
     if too_large(nx) || ny.checked_mul(nz).map_or(true, too_large) {
-        return Err(Error::format(path, format!("a {nx}×{ny}×{nz} volume exceeds the EXR image size limit")));
+        return Err(Error::format(
+            path,
+            format!("a {nx}×{ny}×{nz} volume exceeds the EXR image size limit"),
+        ));
     }
-    if let Some(n) = volume.data().iter().position(|v| v.abs() > f64::from(f32::MAX)) {
-        return Err(Error::format(path, format!("voxel {n} value {} is beyond the f32 range", volume.data()[n])));
+    if let Some(n) = volume
+        .data()
+        .iter()
+        .position(|v| v.abs() > f64::from(f32::MAX))
+    {
+        return Err(Error::format(
+            path,
+            format!(
+                "voxel {n} value {} is beyond the f32 range",
+                volume.data()[n]
+            ),
+        ));
     }
     let samples = FlatSamples::F32(volume.data().iter().map(|&v| v as f32).collect());
     let mut attributes = LayerAttributes::named("volume");
-    attributes
-        .other
-        .insert(Text::from(DIMS_ATTRIBUTE), AttributeValue::IntVec3((nx as i32, ny as i32, nz as i32)));
-    attributes
-        .other
-        .insert(Text::from(AFFINE_ATTRIBUTE), AttributeValue::Text(Text::from(format_affine(volume.voxel_to_world()).as_str())));
+    attributes.other.insert(
+        Text::from(DIMS_ATTRIBUTE),
+        AttributeValue::IntVec3((nx as i32, ny as i32, nz as i32)),
+    );
+    attributes.other.insert(
+        Text::from(AFFINE_ATTRIBUTE),
+        AttributeValue::Text(Text::from(format_affine(volume.voxel_to_world()).as_str())),
+    );
     let channels = AnyChannels::sort(SmallVec::from_vec(vec![AnyChannel::new(CHANNEL, samples)]));
-    let image = Image::from_layer(Layer::new((nx, ny * nz), attributes, Encoding::SMALL_LOSSLESS, channels));
+    let image = Image::from_layer(Layer::new(
+        (nx, ny * nz),
+        attributes,
+        Encoding::SMALL_LOSSLESS,
+        channels,
+    ));
     let mut bytes = Cursor::new(Vec::new());
-    image.write().to_buffered(&mut bytes).map_err(|e| exr_error(path, e))?;
+    image
+        .write()
+        .to_buffered(&mut bytes)
+        .map_err(|e| exr_error(path, e))?;
     write_atomic(path, |w| w.write_all(bytes.get_ref()))
 }
 
 /// The first three rows of `m`, row-major, shortest round-trip decimals.
 fn format_affine(m: &Matrix4<f64>) -> String {
-    let numbers: Vec<String> = (0..3).flat_map(|r| (0..4).map(move |c| (r, c))).map(|(r, c)| format!("{:?}", m[(r, c)])).collect();
+    let numbers: Vec<String> = (0..3)
+        .flat_map(|r| (0..4).map(move |c| (r, c)))
+        .map(|(r, c)| format!("{:?}", m[(r, c)]))
+        .collect();
     numbers.join(" ")
 }
 
@@ -122,12 +165,24 @@ fn format_affine(m: &Matrix4<f64>) -> String {
 fn parse_affine(text: &str) -> std::result::Result<Matrix4<f64>, String> {
     let numbers: Vec<f64> = text
         .split_whitespace()
-        .map(|t| t.parse::<f64>().map_err(|_| format!("{AFFINE_ATTRIBUTE}: {t:?} is not a number")))
+        .map(|t| {
+            t.parse::<f64>()
+                .map_err(|_| format!("{AFFINE_ATTRIBUTE}: {t:?} is not a number"))
+        })
         .collect::<std::result::Result<_, _>>()?;
     if numbers.len() != 12 {
-        return Err(format!("{AFFINE_ATTRIBUTE} has {} numbers, expected 12 (3 rows of 4)", numbers.len()));
+        return Err(format!(
+            "{AFFINE_ATTRIBUTE} has {} numbers, expected 12 (3 rows of 4)",
+            numbers.len()
+        ));
     }
-    Ok(Matrix4::from_fn(|r, c| if r < 3 { numbers[4 * r + c] } else { f64::from(u8::from(c == 3)) }))
+    Ok(Matrix4::from_fn(|r, c| {
+        if r < 3 {
+            numbers[4 * r + c]
+        } else {
+            f64::from(u8::from(c == 3))
+        }
+    }))
 }
 
 /// An error of the `exr` crate for `path`: I/O errors stay I/O errors.

@@ -57,12 +57,17 @@ pub enum NiftiType {
 /// dimensions, [`Error::Model`] for values or an affine map the engine refuses (NaN voxels, a
 /// singular map).
 pub fn read_nifti(path: &Path) -> Result<Volume> {
-    let object = ReaderOptions::new().read_file(path).map_err(|e| nifti_error(path, e))?;
+    let object = ReaderOptions::new()
+        .read_file(path)
+        .map_err(|e| nifti_error(path, e))?;
     let header = object.header().clone();
     let dims = spatial_dims(&header).map_err(|m| Error::format(path, m))?;
     check_datatype(&header).map_err(|m| Error::format(path, m))?;
     let affine = voxel_to_world(&header);
-    let array = object.into_volume().into_ndarray::<f64>().map_err(|e| nifti_error(path, e))?;
+    let array = object
+        .into_volume()
+        .into_ndarray::<f64>()
+        .map_err(|e| nifti_error(path, e))?;
     // NIfTI data are in Fortran order (x fastest), as are the arrays the crate builds.
     let data = array
         .as_slice_memory_order()
@@ -78,7 +83,10 @@ pub fn read_nifti(path: &Path) -> Result<Volume> {
 /// the datatype cannot hold (non-integer or out of range for `U8`/`I16`, beyond the `f32` range
 /// for `F32`); [`Error::Io`] if the file cannot be written.
 pub fn write_nifti(path: &Path, volume: &Volume, datatype: NiftiType) -> Result<()> {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let suffix = [".nii.gz", ".nii"]
         .into_iter()
         .find(|s| name.ends_with(s) && name.len() > s.len())
@@ -99,10 +107,18 @@ pub fn write_nifti(path: &Path, volume: &Volume, datatype: NiftiType) -> Result<
     let options = WriterOptions::new(temp.path()).reference_header(&header);
     // The crate writes `ndarray`s; its own volume type converts the raw bytes to one.
     let written = match datatype {
-        NiftiType::U8 => raw.into_ndarray::<u8>().and_then(|a| options.write_nifti(&a)),
-        NiftiType::I16 => raw.into_ndarray::<i16>().and_then(|a| options.write_nifti(&a)),
-        NiftiType::F32 => raw.into_ndarray::<f32>().and_then(|a| options.write_nifti(&a)),
-        NiftiType::F64 => raw.into_ndarray::<f64>().and_then(|a| options.write_nifti(&a)),
+        NiftiType::U8 => raw
+            .into_ndarray::<u8>()
+            .and_then(|a| options.write_nifti(&a)),
+        NiftiType::I16 => raw
+            .into_ndarray::<i16>()
+            .and_then(|a| options.write_nifti(&a)),
+        NiftiType::F32 => raw
+            .into_ndarray::<f32>()
+            .and_then(|a| options.write_nifti(&a)),
+        NiftiType::F64 => raw
+            .into_ndarray::<f64>()
+            .and_then(|a| options.write_nifti(&a)),
     };
     written.map_err(|e| nifti_error(path, e))?;
     temp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
@@ -122,17 +138,27 @@ fn voxel_to_world(header: &NiftiHeader) -> Matrix4<f64> {
     };
     if header.sform_code > 0 {
         let rows = [header.srow_x, header.srow_y, header.srow_z];
-        return Matrix4::from_fn(|r, c| if r < 3 { f64::from(rows[r][c]) } else { f64::from(u8::from(c == 3)) });
+        return Matrix4::from_fn(|r, c| {
+            if r < 3 {
+                f64::from(rows[r][c])
+            } else {
+                f64::from(u8::from(c == 3))
+            }
+        });
     }
     if header.qform_code > 0 {
         let qfac = if header.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
         let positive = |i: usize| if spacing(i) > 0.0 { spacing(i) } else { 1.0 };
         let scale = Vec3::new(positive(1), positive(2), qfac * positive(3));
         let rotation = quaternion_rotation(header.quatern_b, header.quatern_c, header.quatern_d);
-        let offset = nalgebra::Vector3::new(header.quatern_x, header.quatern_y, header.quatern_z).map(f64::from);
+        let offset = nalgebra::Vector3::new(header.quatern_x, header.quatern_y, header.quatern_z)
+            .map(f64::from);
         return affine(&(rotation * Matrix3::from_diagonal(&scale)), &offset);
     }
-    affine(&Matrix3::from_diagonal(&Vec3::new(spacing(1), spacing(2), spacing(3))), &Vec3::zeros())
+    affine(
+        &Matrix3::from_diagonal(&Vec3::new(spacing(1), spacing(2), spacing(3))),
+        &Vec3::zeros(),
+    )
 }
 
 /// The rotation of the NIfTI quaternion `(a, b, c, d)`, `a` implied (`nifti_quatern_to_mat44`).
@@ -166,7 +192,9 @@ fn affine(a: &Matrix3<f64>, t: &Vec3) -> Matrix4<f64> {
 
 /// `[nx, ny, nz]` from `dim`, refusing a non-trivial fourth or higher dimension.
 fn spatial_dims(header: &NiftiHeader) -> std::result::Result<[usize; 3], String> {
-    let dim = header.dim().map_err(|e| format!("invalid dimensions {:?}: {e}", header.dim))?;
+    let dim = header
+        .dim()
+        .map_err(|e| format!("invalid dimensions {:?}: {e}", header.dim))?;
     if let Some((n, &size)) = dim.iter().enumerate().skip(3).find(|&(_, &s)| s != 1) {
         return Err(format!(
             "dimension {} has size {size}: only 3-D volumes (or 4-D with one time point) are \
@@ -174,7 +202,9 @@ fn spatial_dims(header: &NiftiHeader) -> std::result::Result<[usize; 3], String>
             n + 1
         ));
     }
-    Ok(std::array::from_fn(|a| dim.get(a).map_or(1, |&s| usize::from(s))))
+    Ok(std::array::from_fn(|a| {
+        dim.get(a).map_or(1, |&s| usize::from(s))
+    }))
 }
 
 /// Refuses datatypes that are not real scalars.
@@ -182,10 +212,20 @@ fn check_datatype(header: &NiftiHeader) -> std::result::Result<(), String> {
     use nifti::NiftiType as T;
     match header.data_type() {
         Ok(
-            T::Uint8 | T::Int8 | T::Uint16 | T::Int16 | T::Uint32 | T::Int32 | T::Uint64
-            | T::Int64 | T::Float32 | T::Float64,
+            T::Uint8
+            | T::Int8
+            | T::Uint16
+            | T::Int16
+            | T::Uint32
+            | T::Int32
+            | T::Uint64
+            | T::Int64
+            | T::Float32
+            | T::Float64,
         ) => Ok(()),
-        Ok(other) => Err(format!("unsupported voxel type {other:?}: need integers or reals")),
+        Ok(other) => Err(format!(
+            "unsupported voxel type {other:?}: need integers or reals"
+        )),
         Err(_) => Err(format!("unknown datatype code {}", header.datatype)),
     }
 }
@@ -197,7 +237,12 @@ fn raw_dims(dims: [usize; 3]) -> std::result::Result<[u16; 8], String> {
         dim[a + 1] = u16::try_from(n)
             .ok()
             .filter(|&n| n <= i16::MAX as u16)
-            .ok_or_else(|| format!("dimension {} of size {n} exceeds the NIfTI-1 limit 32767", a + 1))?;
+            .ok_or_else(|| {
+                format!(
+                    "dimension {} of size {n} exceeds the NIfTI-1 limit 32767",
+                    a + 1
+                )
+            })?;
     }
     Ok(dim)
 }
@@ -213,14 +258,15 @@ fn crate_type(datatype: NiftiType) -> nifti::NiftiType {
 
 /// The values as native-endian bytes of `datatype`, refusing values it cannot hold.
 fn encode(values: &[f64], datatype: NiftiType) -> std::result::Result<Vec<u8>, String> {
-    let check = |range: (f64, f64), integer: bool| {
-        match values.iter().position(|&v| !(v >= range.0 && v <= range.1) || (integer && v.fract() != 0.0)) {
-            Some(n) => Err(format!(
-                "voxel {n} has value {}, which {datatype:?} cannot hold (use a wider or floating type)",
-                values[n]
-            )),
-            None => Ok(()),
-        }
+    let check = |range: (f64, f64), integer: bool| match values
+        .iter()
+        .position(|&v| !(v >= range.0 && v <= range.1) || (integer && v.fract() != 0.0))
+    {
+        Some(n) => Err(format!(
+            "voxel {n} has value {}, which {datatype:?} cannot hold (use a wider or floating type)",
+            values[n]
+        )),
+        None => Ok(()),
     };
     Ok(match datatype {
         NiftiType::U8 => {
@@ -229,11 +275,17 @@ fn encode(values: &[f64], datatype: NiftiType) -> std::result::Result<Vec<u8>, S
         }
         NiftiType::I16 => {
             check((-32768.0, 32767.0), true)?;
-            values.iter().flat_map(|&v| (v as i16).to_ne_bytes()).collect()
+            values
+                .iter()
+                .flat_map(|&v| (v as i16).to_ne_bytes())
+                .collect()
         }
         NiftiType::F32 => {
             check((-f64::from(f32::MAX), f64::from(f32::MAX)), false)?;
-            values.iter().flat_map(|&v| (v as f32).to_ne_bytes()).collect()
+            values
+                .iter()
+                .flat_map(|&v| (v as f32).to_ne_bytes())
+                .collect()
         }
         NiftiType::F64 => values.iter().flat_map(|&v| v.to_ne_bytes()).collect(),
     })
@@ -252,7 +304,12 @@ fn header_for(volume: &Volume, datatype: NiftiType) -> NiftiHeader {
         qform_code: XForm::Unknown as i16,
         ..NiftiHeader::default()
     };
-    header.pixdim[..4].copy_from_slice(&[1.0, spacing.x as f32, spacing.y as f32, spacing.z as f32]);
+    header.pixdim[..4].copy_from_slice(&[
+        1.0,
+        spacing.x as f32,
+        spacing.y as f32,
+        spacing.z as f32,
+    ]);
     let row = |r: usize| std::array::from_fn(|c| m[(r, c)] as f32);
     (header.srow_x, header.srow_y, header.srow_z) = (row(0), row(1), row(2));
     let direction = a * Matrix3::from_diagonal(&spacing.map(|s| 1.0 / s));
@@ -260,8 +317,10 @@ fn header_for(volume: &Volume, datatype: NiftiType) -> NiftiHeader {
         let (qfac, q) = nifti_quaternion(&direction);
         header.qform_code = XForm::ScannerAnat as i16;
         header.pixdim[0] = qfac as f32;
-        (header.quatern_b, header.quatern_c, header.quatern_d) = (q.i as f32, q.j as f32, q.k as f32);
-        (header.quatern_x, header.quatern_y, header.quatern_z) = (m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32);
+        (header.quatern_b, header.quatern_c, header.quatern_d) =
+            (q.i as f32, q.j as f32, q.k as f32);
+        (header.quatern_x, header.quatern_y, header.quatern_z) =
+            (m[(0, 3)] as f32, m[(1, 3)] as f32, m[(2, 3)] as f32);
     }
     header
 }
@@ -279,17 +338,16 @@ fn nifti_quaternion(direction: &Matrix3<f64>) -> (f64, Quaternion<f64>) {
     (qfac, if q.w < 0.0 { -q } else { q })
 }
 
-/// A temporary file named `.<destination>.<random><suffix>` beside `path`, with the
-/// permissions of an ordinary new file (the crate picks compression from the suffix).
+/// A temporary file `.medial-<random><suffix>` beside `path`, with the permissions of an
+/// ordinary new file. The name has no dot but the leading one and the suffix's: the crate
+/// rebuilds the output name by swapping the last extension, and picks compression from it.
 fn temp_file_beside(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
     let dir = match path.parent() {
         Some(parent) if !parent.as_os_str().is_empty() => parent,
         _ => Path::new("."),
     };
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let prefix = format!(".{name}.");
     let mut builder = tempfile::Builder::new();
-    builder.prefix(&prefix).suffix(suffix);
+    builder.prefix(".medial-").suffix(suffix);
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;

@@ -19,7 +19,8 @@ fn oblique(left_handed: bool) -> Matrix4<f64> {
     let a = r.matrix() * Matrix3::from_diagonal(&Vec3::new(0.9, 1.2, 2.5 * flip));
     let mut m = Matrix4::identity();
     m.fixed_view_mut::<3, 3>(0, 0).copy_from(&a);
-    m.fixed_view_mut::<3, 1>(0, 3).copy_from(&Vec3::new(-91.5, 12.25, 40.0));
+    m.fixed_view_mut::<3, 1>(0, 3)
+        .copy_from(&Vec3::new(-91.5, 12.25, 40.0));
     m
 }
 
@@ -39,7 +40,8 @@ fn assert_affine_close(a: &Matrix4<f64>, b: &Matrix4<f64>, tolerance: f64) {
 #[test]
 fn nifti_round_trips_every_datatype() {
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(NiftiType, fn(usize) -> f64, f64); 4] = [
+    type Values = fn(usize) -> f64;
+    let cases: [(NiftiType, Values, f64); 4] = [
         (NiftiType::U8, |n| (n * 4 % 256) as f64, 0.0),
         (NiftiType::I16, |n| n as f64 * 517.0 - 15000.0, 0.0),
         (NiftiType::F32, |n| (n as f64 * 0.37).sin() * 1e3, 1e-4),
@@ -53,13 +55,19 @@ fn nifti_round_trips_every_datatype() {
             let back = read_nifti(&path).unwrap();
             assert_eq!(back.dims(), original.dims());
             for (a, b) in back.data().iter().zip(original.data()) {
-                assert!((a - b).abs() <= tolerance * b.abs().max(1.0), "{datatype:?}: {a} vs {b}");
+                assert!(
+                    (a - b).abs() <= tolerance * b.abs().max(1.0),
+                    "{datatype:?}: {a} vs {b}"
+                );
             }
             // Header fields are f32: about 7 significant digits of the 100 mm offsets.
             assert_affine_close(back.voxel_to_world(), original.voxel_to_world(), 2e-5);
         }
     }
-    let names: Vec<String> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
     assert_eq!(names.len(), 8, "no temporary files left: {names:?}");
 }
 
@@ -73,8 +81,16 @@ fn written_qform_matches_the_sform() {
         let path = dir.path().join("q.nii");
         write_nifti(&path, &original, NiftiType::U8).unwrap();
         let mut bytes = std::fs::read(&path).unwrap();
-        assert_eq!(i16::from_le_bytes([bytes[252], bytes[253]]), 1, "qform_code");
-        assert_eq!(i16::from_le_bytes([bytes[254], bytes[255]]), 1, "sform_code");
+        assert_eq!(
+            i16::from_le_bytes([bytes[252], bytes[253]]),
+            1,
+            "qform_code"
+        );
+        assert_eq!(
+            i16::from_le_bytes([bytes[254], bytes[255]]),
+            1,
+            "sform_code"
+        );
         bytes[254..256].copy_from_slice(&0i16.to_le_bytes());
         std::fs::write(&path, &bytes).unwrap();
         let from_qform = read_nifti(&path).unwrap();
@@ -85,7 +101,11 @@ fn written_qform_matches_the_sform() {
     let path = dir.path().join("s.nii");
     write_nifti(&path, &volume(|n| n as f64, sheared), NiftiType::F32).unwrap();
     let bytes = std::fs::read(&path).unwrap();
-    assert_eq!(i16::from_le_bytes([bytes[252], bytes[253]]), 0, "no qform for a sheared grid");
+    assert_eq!(
+        i16::from_le_bytes([bytes[252], bytes[253]]),
+        0,
+        "no qform for a sheared grid"
+    );
     assert_affine_close(read_nifti(&path).unwrap().voxel_to_world(), &sheared, 2e-5);
 }
 
@@ -120,7 +140,9 @@ impl Header {
     /// The 348-byte header, the 4-byte empty extension and `data`, at the NIfTI-1 offsets.
     fn file(&self, data: &[u8]) -> Vec<u8> {
         let mut b = vec![0u8; 352];
-        let put = |b: &mut Vec<u8>, at: usize, bytes: &[u8]| b[at..at + bytes.len()].copy_from_slice(bytes);
+        let put = |b: &mut Vec<u8>, at: usize, bytes: &[u8]| {
+            b[at..at + bytes.len()].copy_from_slice(bytes)
+        };
         put(&mut b, 0, &348i32.to_le_bytes());
         for (n, d) in self.dim.iter().enumerate() {
             put(&mut b, 40 + 2 * n, &d.to_le_bytes());
@@ -153,7 +175,10 @@ impl Header {
         let path = dir.join(name);
         let bytes = self.file(data);
         if name.ends_with(".gz") {
-            let mut gz = GzEncoder::new(std::fs::File::create(&path).unwrap(), flate2::Compression::default());
+            let mut gz = GzEncoder::new(
+                std::fs::File::create(&path).unwrap(),
+                flate2::Compression::default(),
+            );
             gz.write_all(&bytes).unwrap();
             gz.finish().unwrap();
         } else {
@@ -168,7 +193,11 @@ fn sform_only_header_gives_its_rows() {
     let dir = tempfile::tempdir().unwrap();
     let mut h = Header::new([3, 4, 5]);
     h.sform_code = 2;
-    h.srow = [[0.0, -1.5, 0.2, 10.0], [2.0, 0.0, 0.0, -20.0], [0.1, 0.3, 3.0, 5.5]];
+    h.srow = [
+        [0.0, -1.5, 0.2, 10.0],
+        [2.0, 0.0, 0.0, -20.0],
+        [0.1, 0.3, 3.0, 5.5],
+    ];
     let path = h.write(dir.path(), "sform.nii.gz", &[0u8; 60]);
     let v = read_nifti(&path).unwrap();
     assert_eq!(v.dims(), [3, 4, 5]);
@@ -188,7 +217,11 @@ fn qform_only_header_gives_the_quaternion_map() {
     let v = read_nifti(&h.write(dir.path(), "q90.nii", &[0u8; 60])).unwrap();
     // R = [[0, −1, 0], [1, 0, 0], [0, 0, 1]]; columns 2·(0, 1, 0), 3·(−1, 0, 0), −4·(0, 0, 1):
     // voxel (1, 2, 3) → (10 − 6, 20 + 2, 30 − 12) = (4, 22, 18).
-    assert!((world(&v, 1.0, 2.0, 3.0) - Vec3::new(4.0, 22.0, 18.0)).norm() < 1e-5, "{}", world(&v, 1.0, 2.0, 3.0));
+    assert!(
+        (world(&v, 1.0, 2.0, 3.0) - Vec3::new(4.0, 22.0, 18.0)).norm() < 1e-5,
+        "{}",
+        world(&v, 1.0, 2.0, 3.0)
+    );
 
     // An oblique rotation, checked against Rodrigues' formula for the same axis and angle.
     let (axis, angle) = (Vec3::new(0.3, -0.5, 0.8).normalize(), 0.9f64);
@@ -196,8 +229,12 @@ fn qform_only_header_gives_the_quaternion_map() {
     h.pixdim[..4].copy_from_slice(&[1.0, 0.7, 1.1, 1.9]);
     h.quatern = [bcd.x as f32, bcd.y as f32, bcd.z as f32, -5.0, 7.5, 1.25];
     let v = read_nifti(&h.write(dir.path(), "oblique.nii", &[0u8; 60])).unwrap();
-    let k = Matrix3::new(0.0, -axis.z, axis.y, axis.z, 0.0, -axis.x, -axis.y, axis.x, 0.0);
-    let r = Matrix3::identity() * angle.cos() + k * angle.sin() + axis * axis.transpose() * (1.0 - angle.cos());
+    let k = Matrix3::new(
+        0.0, -axis.z, axis.y, axis.z, 0.0, -axis.x, -axis.y, axis.x, 0.0,
+    );
+    let r = Matrix3::identity() * angle.cos()
+        + k * angle.sin()
+        + axis * axis.transpose() * (1.0 - angle.cos());
     let expected = Vec3::new(-5.0, 7.5, 1.25) + r * Vec3::new(0.7 * 2.0, 1.1 * 1.0, 1.9 * 4.0);
     assert!((world(&v, 2.0, 1.0, 4.0) - expected).norm() < 1e-5);
 }
@@ -212,7 +249,11 @@ fn sform_wins_over_qform_and_spacing_is_the_fallback() {
     h.qform_code = 1;
     h.quatern = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0];
     h.sform_code = 1;
-    h.srow = [[3.0, 0.0, 0.0, 0.0], [0.0, 3.0, 0.0, 0.0], [0.0, 0.0, 3.0, 0.0]];
+    h.srow = [
+        [3.0, 0.0, 0.0, 0.0],
+        [0.0, 3.0, 0.0, 0.0],
+        [0.0, 0.0, 3.0, 0.0],
+    ];
     let v = read_nifti(&h.write(dir.path(), "both.nii", &[0u8; 8])).unwrap();
     assert!((world(&v, 1.0, 1.0, 1.0) - Vec3::repeat(3.0)).norm() < 1e-12);
 }
@@ -233,13 +274,24 @@ fn datatypes_scaling_and_four_dimensions() {
     let v = read_nifti(&h.write(dir.path(), "u16.nii", &[0xff, 0xff, 1, 0])).unwrap();
     assert_eq!(v.data(), &[65535.0, 1.0]);
     (h.datatype, h.bitpix) = (64, 64);
-    let data: Vec<u8> = [0.25f64, -1e10].iter().flat_map(|v| v.to_le_bytes()).collect();
-    assert_eq!(read_nifti(&h.write(dir.path(), "f64.nii", &data)).unwrap().data(), &[0.25, -1e10]);
+    let data: Vec<u8> = [0.25f64, -1e10]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    assert_eq!(
+        read_nifti(&h.write(dir.path(), "f64.nii", &data))
+            .unwrap()
+            .data(),
+        &[0.25, -1e10]
+    );
     // Two time points: refused.
     let mut h = Header::new([2, 1, 1]);
     h.dim = [4, 2, 1, 1, 2, 1, 1, 1];
     let err = read_nifti(&h.write(dir.path(), "t2.nii", &[0; 4])).unwrap_err();
-    assert!(matches!(err, Error::Format { .. }) && err.to_string().contains("dimension 4 has size 2"), "{err}");
+    assert!(
+        matches!(err, Error::Format { .. }) && err.to_string().contains("dimension 4 has size 2"),
+        "{err}"
+    );
     // Complex voxels: refused.
     let mut h = Header::new([1, 1, 1]);
     (h.datatype, h.bitpix) = (32, 64);
@@ -252,9 +304,16 @@ fn degenerate_or_invalid_content_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let mut h = Header::new([2, 2, 2]);
     h.sform_code = 1;
-    h.srow = [[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
+    h.srow = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0],
+    ];
     let err = read_nifti(&h.write(dir.path(), "flat.nii", &[0; 8])).unwrap_err();
-    assert!(matches!(err, Error::Model { .. }) && err.to_string().contains("zero column 1"), "{err}");
+    assert!(
+        matches!(err, Error::Model { .. }) && err.to_string().contains("zero column 1"),
+        "{err}"
+    );
     let mut h = Header::new([1, 1, 1]);
     (h.datatype, h.bitpix) = (16, 32);
     let err = read_nifti(&h.write(dir.path(), "nan.nii", &f32::NAN.to_le_bytes())).unwrap_err();
@@ -286,18 +345,37 @@ fn exr_round_trip_keeps_values_and_the_exact_map() {
     write_exr_volume(&path, &original).unwrap();
     let back = read_exr_volume(&path).unwrap();
     assert_eq!(back.dims(), original.dims());
-    assert_eq!(back.data(), original.data(), "quarter-integers are exact in f32");
-    assert_eq!(back.voxel_to_world(), original.voxel_to_world(), "the map round-trips exactly");
+    assert_eq!(
+        back.data(),
+        original.data(),
+        "quarter-integers are exact in f32"
+    );
+    assert_eq!(
+        back.voxel_to_world(),
+        original.voxel_to_world(),
+        "the map round-trips exactly"
+    );
     // The convention: a 5 × (4·3) single-channel image with the two attributes.
     let image = exr::prelude::read_first_flat_layer_from_file(&path).unwrap();
     let layer = &image.layer_data;
     assert_eq!((layer.size.width(), layer.size.height()), (5, 12));
     assert_eq!(layer.channel_data.list.len(), 1);
     assert_eq!(layer.channel_data.list[0].name.to_string(), "Y");
-    let voxel = |i: usize, j: usize, k: usize| layer.channel_data.list[0].sample_data.value_by_flat_index(i + 5 * (j + 4 * k)).to_f32();
-    assert_eq!(f64::from(voxel(3, 2, 1)), original.data()[3 + 5 * (2 + 4 * 1)]);
+    let voxel = |i: usize, j: usize, k: usize| {
+        layer.channel_data.list[0]
+            .sample_data
+            .value_by_flat_index(i + 5 * (j + 4 * k))
+            .to_f32()
+    };
+    assert_eq!(f64::from(voxel(3, 2, 1)), original.data()[3 + 5 * (2 + 4)]);
     for name in [DIMS_ATTRIBUTE, AFFINE_ATTRIBUTE] {
-        assert!(layer.attributes.other.contains_key(&exr::prelude::Text::from(name)), "{name}");
+        assert!(
+            layer
+                .attributes
+                .other
+                .contains_key(&exr::prelude::Text::from(name)),
+            "{name}"
+        );
     }
 }
 
@@ -308,10 +386,15 @@ fn exr_without_attributes_is_one_slice() {
     exr::prelude::write_rgb_file(&path, 3, 2, |x, y| (x as f32, y as f32, 0.5)).unwrap();
     let err = read_exr_volume(&path).unwrap_err();
     assert!(err.to_string().contains("none named Y"), "{err}");
-    let channel = exr::prelude::AnyChannel::new("Y", exr::prelude::FlatSamples::F32(vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]));
+    let channel = exr::prelude::AnyChannel::new(
+        "Y",
+        exr::prelude::FlatSamples::F32(vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]),
+    );
     let channels = exr::prelude::AnyChannels::sort(exr::prelude::SmallVec::from_vec(vec![channel]));
     let image = exr::prelude::Image::from_channels((3, 2), channels);
-    exr::prelude::WritableImage::write(&image).to_file(&path).unwrap();
+    exr::prelude::WritableImage::write(&image)
+        .to_file(&path)
+        .unwrap();
     let v = read_exr_volume(&path).unwrap();
     assert_eq!(v.dims(), [3, 2, 1]);
     assert_eq!(v.data(), &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);

@@ -31,6 +31,12 @@
 //! corners), `∂vol/∂p = (q × r)/6` for each face `(p, q, r)`, and the linear maps from sample
 //! points back to landmarks.
 //!
+//! **Accuracy.** The corner rule is a trapezoidal rule across the layers, and the boundary
+//! samples sit on the image edge where `f ≈ 1/2`: a model against the smoothed rasterization
+//! of itself scores about `1 − 1/(4·layers)` minus the blur of the edge (≈ 0.13 mm × area /
+//! volume at 0.5 mm voxels, σ = 0.2 mm). Measured: 0.927 for a thick slab and 0.893 for the
+//! cmrep t001 template at the defaults, 0.978 / 0.981 for the slab with 20 / 40 layers.
+//!
 //! **Parallelism.** Triangles are cut into fixed chunks; each chunk sums into its own
 //! accumulators, which are then added in chunk order: the result is the same, bit for bit,
 //! whatever the number of threads.
@@ -60,7 +66,10 @@ pub struct DiceParams {
 impl Default for DiceParams {
     /// The reference defaults: `subdivision = 2`, `layers = 5`.
     fn default() -> Self {
-        Self { subdivision: 2, layers: 5 }
+        Self {
+            subdivision: 2,
+            layers: 5,
+        }
     }
 }
 
@@ -89,7 +98,11 @@ struct Combination {
 
 impl Combination {
     fn single(index: usize) -> Self {
-        Self { index: [index, 0, 0], weight: [1.0, 0.0, 0.0], len: 1 }
+        Self {
+            index: [index, 0, 0],
+            weight: [1.0, 0.0, 0.0],
+            len: 1,
+        }
     }
 
     fn terms(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
@@ -99,7 +112,11 @@ impl Combination {
     /// Merges weighted terms (equal indices added, sorted by index). The terms of every
     /// combination built here span the corners of one input triangle, so at most three remain.
     fn from_terms(terms: impl IntoIterator<Item = (usize, f64)>) -> Self {
-        let mut c = Self { index: [0; 3], weight: [0.0; 3], len: 0 };
+        let mut c = Self {
+            index: [0; 3],
+            weight: [0.0; 3],
+            len: 0,
+        };
         for (index, weight) in terms {
             match c.index[..c.len].iter().position(|&i| i == index) {
                 Some(n) => c.weight[n] += weight,
@@ -130,7 +147,8 @@ impl Combination {
     }
 
     fn apply(&self, q: &[Vec3]) -> Vec3 {
-        self.terms().fold(Vec3::zeros(), |acc, (i, w)| acc + w * q[i])
+        self.terms()
+            .fold(Vec3::zeros(), |acc, (i, w)| acc + w * q[i])
     }
 
     /// `grad[index_j] += weight_j · g`.
@@ -144,6 +162,14 @@ impl Combination {
 struct Stencil {
     boundary: Combination,
     medial: Combination,
+}
+
+impl Stencil {
+    /// Adds a gradient `[∂/∂b, ∂/∂m]` at this vertex to the landmark gradient `grad`.
+    fn scatter(&self, g: &[Vec3; 2], grad: &mut [Vec3]) {
+        self.boundary.scatter(&g[0], grad);
+        self.medial.scatter(&g[1], grad);
+    }
 }
 
 /// A sample point: position, image value and image gradient.
@@ -201,18 +227,30 @@ impl DiceAttachment {
         check_model(boundary_triangles, medial_of, landmark_count)?;
         check_params(boundary_triangles.len(), params)?;
         let image_volume = image.integral();
-        if !(image_volume > 0.0) {
+        if image_volume <= 0.0 {
             return Err(Error::InvalidVolume(format!(
                 "the image has no foreground (∫ f = {image_volume} mm³): check the label"
             )));
         }
-        let (combinations, triangles) = subdivide(medial_of.len(), boundary_triangles, params.subdivision);
+        let (combinations, triangles) =
+            subdivide(medial_of.len(), boundary_triangles, params.subdivision);
         let stencils = combinations
             .into_iter()
-            .map(|boundary| Stencil { boundary, medial: boundary.mapped(medial_of) })
+            .map(|boundary| Stencil {
+                boundary,
+                medial: boundary.mapped(medial_of),
+            })
             .collect();
         let faces = triangles.iter().map(prism_faces).collect();
-        Ok(Self { landmark_count, stencils, triangles, faces, layers: params.layers, image, image_volume })
+        Ok(Self {
+            landmark_count,
+            stencils,
+            triangles,
+            faces,
+            layers: params.layers,
+            image,
+            image_volume,
+        })
     }
 
     /// Number of landmarks `k` expected by [`Self::evaluate`].
@@ -252,7 +290,10 @@ impl DiceAttachment {
             .chunks(CHUNK)
             .map(|tris| self.chunk_sums(&tris, &samples, want_grad))
             .collect();
-        let total = chunks.into_iter().reduce(ChunkSums::add).unwrap_or_else(|| ChunkSums::zero(0));
+        let total = chunks
+            .into_iter()
+            .reduce(ChunkSums::add)
+            .unwrap_or_else(|| ChunkSums::zero(0));
         let denominator = total.volume + self.image_volume;
         let value = DiceValue {
             dice: 2.0 * total.overlap / denominator,
@@ -264,7 +305,10 @@ impl DiceAttachment {
         if let Some(grad) = grad {
             let alpha = 2.0 / denominator;
             let beta = -2.0 * total.overlap / (denominator * denominator);
-            for (g, (go, gv)) in grad.iter_mut().zip(total.grad_overlap.iter().zip(&total.grad_volume)) {
+            for (g, (go, gv)) in grad
+                .iter_mut()
+                .zip(total.grad_overlap.iter().zip(&total.grad_volume))
+            {
                 *g = alpha * go + beta * gv;
             }
         }
@@ -275,13 +319,20 @@ impl DiceAttachment {
         if found == self.landmark_count {
             return Ok(());
         }
-        Err(Error::ShapeMismatch { what: what.into(), expected: self.landmark_count, found })
+        Err(Error::ShapeMismatch {
+            what: what.into(),
+            expected: self.landmark_count,
+            found,
+        })
     }
 
     /// All sample points, sheet by sheet (`i · nv + v`), with the image value (and gradient).
     fn samples(&self, q: &[Vec3], want_grad: bool) -> Vec<Sample> {
-        let ends: Vec<(Vec3, Vec3)> =
-            self.stencils.par_iter().map(|s| (s.boundary.apply(q), s.medial.apply(q))).collect();
+        let ends: Vec<(Vec3, Vec3)> = self
+            .stencils
+            .par_iter()
+            .map(|s| (s.boundary.apply(q), s.medial.apply(q)))
+            .collect();
         let nv = self.stencils.len();
         (0..nv * (self.layers + 1))
             .into_par_iter()
@@ -340,12 +391,9 @@ impl DiceAttachment {
         }
         if want_grad {
             vertex.add_sheet(1.0, &at(self.layers), &carry);
-            for j in 0..3 {
-                let stencil = &self.stencils[tri[j]];
-                stencil.boundary.scatter(&vertex.overlap[j][0], &mut sums.grad_overlap);
-                stencil.medial.scatter(&vertex.overlap[j][1], &mut sums.grad_overlap);
-                stencil.boundary.scatter(&vertex.volume[j][0], &mut sums.grad_volume);
-                stencil.medial.scatter(&vertex.volume[j][1], &mut sums.grad_volume);
+            for (j, &v) in tri.iter().enumerate() {
+                self.stencils[v].scatter(&vertex.overlap[j], &mut sums.grad_overlap);
+                self.stencils[v].scatter(&vertex.volume[j], &mut sums.grad_volume);
             }
         }
     }
@@ -362,7 +410,11 @@ struct CornerSums {
 
 impl Default for CornerSums {
     fn default() -> Self {
-        Self { weight: 0.0, d_overlap: Vec3::zeros(), d_volume: Vec3::zeros() }
+        Self {
+            weight: 0.0,
+            d_overlap: Vec3::zeros(),
+            d_volume: Vec3::zeros(),
+        }
     }
 }
 
@@ -384,7 +436,10 @@ struct VertexGradients {
 
 impl Default for VertexGradients {
     fn default() -> Self {
-        Self { overlap: [[Vec3::zeros(); 2]; 3], volume: [[Vec3::zeros(); 2]; 3] }
+        Self {
+            overlap: [[Vec3::zeros(); 2]; 3],
+            volume: [[Vec3::zeros(); 2]; 3],
+        }
     }
 }
 
@@ -461,9 +516,15 @@ fn prism_volume(x: &[Vec3; 6], faces: &[[usize; 3]]) -> (f64, [Vec3; 6]) {
 /// `(b, a, a', b')` (primes on the next sheet), split along the diagonal from the bottom corner
 /// of lower vertex id: `a — b'` if `tri[a] < tri[b]`, else `b — a'`.
 fn prism_faces(tri: &[usize; 3]) -> PrismFaces {
-    let mut kept = PrismFaces { faces: [[0; 3]; 5], len: 0 };
+    let mut kept = PrismFaces {
+        faces: [[0; 3]; 5],
+        len: 0,
+    };
     let sides = (0..3).flat_map(|a| side_faces(tri, a));
-    for face in std::iter::once([3, 5, 4]).chain(sides).filter(|f| !f.contains(&0)) {
+    for face in std::iter::once([3, 5, 4])
+        .chain(sides)
+        .filter(|f| !f.contains(&0))
+    {
         kept.faces[kept.len] = face;
         kept.len += 1;
     }
@@ -496,7 +557,11 @@ fn side_faces(tri: &[usize; 3], a: usize) -> [[usize; 3]; 2] {
 /// Midpoint subdivision, `levels` times, of the mesh over points `0..n`. Returns each vertex
 /// as a combination of the input points, and the triangles (orientation kept). New vertex ids
 /// are given in the order edges are met, so the result is deterministic.
-fn subdivide(n: usize, triangles: &[[usize; 3]], levels: usize) -> (Vec<Combination>, Vec<[usize; 3]>) {
+fn subdivide(
+    n: usize,
+    triangles: &[[usize; 3]],
+    levels: usize,
+) -> (Vec<Combination>, Vec<[usize; 3]>) {
     let mut vertices: Vec<Combination> = (0..n).map(Combination::single).collect();
     let mut triangles = triangles.to_vec();
     for _ in 0..levels {
@@ -523,9 +588,15 @@ fn subdivide(n: usize, triangles: &[[usize; 3]], levels: usize) -> (Vec<Combinat
 fn check_model(triangles: &[[usize; 3]], medial_of: &[usize], k: usize) -> Result<()> {
     let nb = medial_of.len();
     if triangles.is_empty() {
-        return Err(Error::InvalidTemplate("the boundary mesh has no triangles".into()));
+        return Err(Error::InvalidTemplate(
+            "the boundary mesh has no triangles".into(),
+        ));
     }
-    if let Some((b, &m)) = medial_of.iter().enumerate().find(|&(_, &m)| m < nb || m >= k) {
+    if let Some((b, &m)) = medial_of
+        .iter()
+        .enumerate()
+        .find(|&(_, &m)| m < nb || m >= k)
+    {
         return Err(Error::InvalidTemplate(format!(
             "boundary point {b} has medial point {m}, outside the medial landmarks {nb}..{k}"
         )));
@@ -537,7 +608,9 @@ fn check_model(triangles: &[[usize; 3]], medial_of: &[usize], k: usize) -> Resul
             )));
         }
         if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
-            return Err(Error::InvalidMesh(format!("boundary triangle {t} repeats a corner: {tri:?}")));
+            return Err(Error::InvalidMesh(format!(
+                "boundary triangle {t} repeats a corner: {tri:?}"
+            )));
         }
     }
     check_closed_oriented(triangles)?;
@@ -588,7 +661,10 @@ fn check_medial_caps(triangles: &[[usize; 3]], medial_of: &[usize]) -> Result<()
             continue;
         }
         balance.entry(canonical(m)).or_insert((0, t)).0 += 1;
-        balance.entry(canonical([m[0], m[2], m[1]])).or_insert((0, t)).0 -= 1;
+        balance
+            .entry(canonical([m[0], m[2], m[1]]))
+            .or_insert((0, t))
+            .0 -= 1;
     }
     let mut unmatched: Vec<_> = balance.into_iter().filter(|(_, (n, _))| *n > 0).collect();
     unmatched.sort_unstable();
@@ -604,7 +680,9 @@ fn check_medial_caps(triangles: &[[usize; 3]], medial_of: &[usize]) -> Result<()
 
 fn check_params(triangle_count: usize, params: DiceParams) -> Result<()> {
     if params.layers == 0 {
-        return Err(Error::InvalidParameter("Dice layers must be at least 1".into()));
+        return Err(Error::InvalidParameter(
+            "Dice layers must be at least 1".into(),
+        ));
     }
     let prisms = 4usize
         .checked_pow(params.subdivision as u32)
@@ -629,7 +707,10 @@ mod tests {
         let (v, t) = subdivide(4, &[[0, 1, 2], [0, 2, 3]], 1);
         assert_eq!(v.len(), 4 + 5);
         assert_eq!(t.len(), 8);
-        let mid02 = v.iter().position(|c| c.len == 2 && c.index[..2] == [0, 2]).unwrap();
+        let mid02 = v
+            .iter()
+            .position(|c| c.len == 2 && c.index[..2] == [0, 2])
+            .unwrap();
         assert_eq!(t.iter().flatten().filter(|&&i| i == mid02).count(), 6);
         let (v2, _) = subdivide(3, &[[0, 1, 2]], 2);
         for c in &v2 {
