@@ -44,19 +44,34 @@ struct Case {
 
 fn random_case(seed: u64, k: usize, steps: usize) -> Case {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let mut point = |scale: f64| Vec3::new(rng.gen_range(-scale..scale), rng.gen_range(-scale..scale), rng.gen_range(-scale..scale));
+    let mut point = |scale: f64| {
+        Vec3::new(
+            rng.gen_range(-scale..scale),
+            rng.gen_range(-scale..scale),
+            rng.gen_range(-scale..scale),
+        )
+    };
     let template: Vec<Vec3> = (0..k).map(|_| point(4.0)).collect();
     let nb = k * 2 / 3;
     let targets: Vec<Vec3> = template[..nb].iter().map(|p| p + point(1.0)).collect();
-    let controls: Vec<f64> = (0..steps * k * 3).map(|_| rng.gen_range(-1.5..1.5)).collect();
-    let pairs: Vec<(usize, usize, f64)> =
-        (0..k / 2).map(|i| (i, k - 1 - i, rng.gen_range(0.5..3.0))).collect();
-    let lambda: Vec<f64> = (0..steps * pairs.len()).map(|_| rng.gen_range(-0.5..0.5)).collect();
+    let controls: Vec<f64> = (0..steps * k * 3)
+        .map(|_| rng.gen_range(-1.5..1.5))
+        .collect();
+    let pairs: Vec<(usize, usize, f64)> = (0..k / 2)
+        .map(|i| (i, k - 1 - i, rng.gen_range(0.5..3.0)))
+        .collect();
+    let lambda: Vec<f64> = (0..steps * pairs.len())
+        .map(|_| rng.gen_range(-0.5..0.5))
+        .collect();
     Case {
         template,
         targets,
         controls,
-        params: FlowParams { sigma: 1.7, time_steps: steps, kinetic_weight: 0.05 },
+        params: FlowParams {
+            sigma: 1.7,
+            time_steps: steps,
+            kinetic_weight: 0.05,
+        },
         constraints: PairDistances(pairs),
         lambda,
         mu: 0.7,
@@ -66,7 +81,11 @@ fn random_case(seed: u64, k: usize, steps: usize) -> Case {
 fn evaluate(case: &Case, flow: &Flow, u: &[f64], grad: Option<&mut [f64]>) -> f64 {
     let ssd = Ssd::new(case.targets.clone()).unwrap();
     let objective = Objective::new(flow, &case.template, &ssd, 1.3)
-        .with_penalty(Penalty { constraints: &case.constraints, mu: case.mu, lambda: &case.lambda })
+        .with_penalty(Penalty {
+            constraints: &case.constraints,
+            mu: case.mu,
+            lambda: &case.lambda,
+        })
         .unwrap();
     objective.evaluate(u, grad).unwrap().total
 }
@@ -86,8 +105,16 @@ fn gradient_matches_central_differences() {
         for _ in 0..5 {
             let dir: Vec<f64> = (0..grad.len()).map(|_| rng.gen_range(-1.0..1.0)).collect();
             let h = 1e-5;
-            let shifted = |s: f64| -> Vec<f64> { case.controls.iter().zip(&dir).map(|(u, d)| u + s * d).collect() };
-            let fd = (evaluate(&case, &flow, &shifted(h), None) - evaluate(&case, &flow, &shifted(-h), None)) / (2.0 * h);
+            let shifted = |s: f64| -> Vec<f64> {
+                case.controls
+                    .iter()
+                    .zip(&dir)
+                    .map(|(u, d)| u + s * d)
+                    .collect()
+            };
+            let fd = (evaluate(&case, &flow, &shifted(h), None)
+                - evaluate(&case, &flow, &shifted(-h), None))
+                / (2.0 * h);
             let exact: f64 = grad.iter().zip(&dir).map(|(g, d)| g * d).sum();
             let rel = (fd - exact).abs() / exact.abs().max(1e-12);
             assert!(rel <= 1e-6, "seed {seed}: directional derivative {exact} vs finite difference {fd} (rel {rel:e})");
@@ -105,13 +132,26 @@ fn gradient_matches_dense_implementation() {
         let ssd = Ssd::new(case.targets.clone()).unwrap();
         let steps = case.params.time_steps;
         let l = case.constraints.len();
-        let (dense_value, dense_grad) =
-            naive::objective(&case.template, &case.controls, case.params.sigma, steps, case.params.kinetic_weight, |n, q| {
+        let (dense_value, dense_grad) = naive::objective(
+            &case.template,
+            &case.controls,
+            case.params.sigma,
+            steps,
+            case.params.kinetic_weight,
+            |n, q| {
                 let mut c = vec![0.0; l];
                 case.constraints.evaluate(q, &mut c);
                 let lam = &case.lambda[(n - 1) * l..n * l];
-                let mut value: f64 = c.iter().zip(lam).map(|(c, lam)| 0.5 * case.mu * c * c - lam * c).sum();
-                let weights: Vec<f64> = c.iter().zip(lam).map(|(c, lam)| case.mu * c - lam).collect();
+                let mut value: f64 = c
+                    .iter()
+                    .zip(lam)
+                    .map(|(c, lam)| 0.5 * case.mu * c * c - lam * c)
+                    .sum();
+                let weights: Vec<f64> = c
+                    .iter()
+                    .zip(lam)
+                    .map(|(c, lam)| case.mu * c - lam)
+                    .collect();
                 let mut g = vec![Vec3::zeros(); q.len()];
                 case.constraints.accumulate_gradient(q, &weights, &mut g);
                 if n == steps {
@@ -120,16 +160,29 @@ fn gradient_matches_dense_implementation() {
                     g.iter_mut().zip(&gd).for_each(|(g, d)| *g += 1.3 * d);
                 }
                 (value, g)
-            });
-        assert!((value - dense_value).abs() <= 1e-12 * dense_value.abs(), "value {value} vs dense {dense_value}");
+            },
+        );
+        assert!(
+            (value - dense_value).abs() <= 1e-12 * dense_value.abs(),
+            "value {value} vs dense {dense_value}"
+        );
         let scale = dense_grad.iter().fold(0.0f64, |m, g| m.max(g.abs()));
-        let worst = grad.iter().zip(&dense_grad).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-        assert!(worst <= 1e-10 * scale, "seed {seed}: max gradient difference {worst:e} (scale {scale:e})");
+        let worst = grad
+            .iter()
+            .zip(&dense_grad)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(
+            worst <= 1e-10 * scale,
+            "seed {seed}: max gradient difference {worst:e} (scale {scale:e})"
+        );
     }
 }
 
 fn bits_with_threads(case: &Case, threads: usize, cache_budget: usize) -> (u64, Vec<u64>) {
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
     pool.install(|| {
         let flow = flow_of(case).with_cache_budget(cache_budget);
         let mut grad = vec![0.0; case.controls.len()];
@@ -176,7 +229,28 @@ fn bad_sizes_and_parameters_are_errors() {
     let flow = flow_of(&case);
     assert!(flow.shoot(&case.template, &case.controls[1..]).is_err());
     assert!(flow.shoot(&case.template[1..], &case.controls).is_err());
-    assert!(Flow::new(FlowParams { time_steps: 0, ..case.params }, 10).is_err());
-    assert!(Flow::new(FlowParams { sigma: -1.0, ..case.params }, 10).is_err());
-    assert!(Flow::new(FlowParams { kinetic_weight: f64::NAN, ..case.params }, 10).is_err());
+    assert!(Flow::new(
+        FlowParams {
+            time_steps: 0,
+            ..case.params
+        },
+        10
+    )
+    .is_err());
+    assert!(Flow::new(
+        FlowParams {
+            sigma: -1.0,
+            ..case.params
+        },
+        10
+    )
+    .is_err());
+    assert!(Flow::new(
+        FlowParams {
+            kinetic_weight: f64::NAN,
+            ..case.params
+        },
+        10
+    )
+    .is_err());
 }
