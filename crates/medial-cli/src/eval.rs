@@ -7,7 +7,7 @@ use crate::model::Model;
 use crate::report::Figures;
 use crate::stage;
 use medial_core::objective::{ConstraintSet, Objective, Penalty};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of `medial eval` beyond the config.
 pub struct EvalOptions {
@@ -76,7 +76,7 @@ pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> 
 }
 
 /// Reads a `.npy` array and checks its shape.
-fn read_array(path: &PathBuf, shape: &[usize], what: &str) -> Result<Vec<f64>, CliError> {
+fn read_array(path: &Path, shape: &[usize], what: &str) -> Result<Vec<f64>, CliError> {
     let array = medial_io::npy::read_npy(path)?;
     if array.shape != shape {
         return Err(CliError::Input(format!(

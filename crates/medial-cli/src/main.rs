@@ -4,9 +4,13 @@ mod config;
 mod error;
 mod eval;
 mod fit;
+mod inflate_cmd;
 mod model;
+mod project_cmd;
+mod rasterize_cmd;
 mod report;
 mod stage;
+mod synth_cmd;
 
 use clap::{Parser, Subcommand};
 use error::CliError;
@@ -59,6 +63,17 @@ enum Command {
         #[arg(long, value_name = "G.npy")]
         gradient: Option<PathBuf>,
     },
+    /// Inflate a medial sheet (a triangle mesh with a Radius per vertex, optionally
+    /// Loop-subdivided) into a cmrep boundary template; prints a JSON summary.
+    Inflate(inflate_cmd::InflateArgs),
+    /// Move a template's points as little as possible so that its medial constraints hold
+    /// (spokes normal to the boundary, equal spokes per atom); prints the figures as JSON.
+    Project(project_cmd::ProjectArgs),
+    /// Write a synthetic case (template, target segmentation from a known deformation,
+    /// affine initialisation, fit.toml) into a folder.
+    Synth(synth_cmd::SynthArgs),
+    /// Rasterize a closed triangle mesh into a binary NIfTI mask.
+    Rasterize(rasterize_cmd::RasterizeArgs),
 }
 
 fn main() -> ExitCode {
@@ -129,6 +144,10 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 serde_json::to_string_pretty(&figures).expect("figures serialise")
             );
         }
+        Command::Inflate(args) => inflate_cmd::run(&args)?,
+        Command::Project(args) => project_cmd::run(&args)?,
+        Command::Synth(args) => synth_cmd::run(&args)?,
+        Command::Rasterize(args) => rasterize_cmd::run(&args)?,
     }
     Ok(())
 }

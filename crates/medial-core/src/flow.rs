@@ -8,18 +8,13 @@
 //!   `a^n_i = a^{n+1}_i + ∇P^n_i − (dt/σ²) Σ_j K^n_ij [a^{n+1}_i·u^n_j + a^{n+1}_j·u^n_i + w u^n_i·u^n_j] (q^n_i − q^n_j)`,
 //!   and `∂E/∂u^n_i = dt Σ_j K^n_ij (a^{n+1}_j + w u^n_j)`.
 //!
-//! Each pass is row-parallel (rayon) with a fixed summation order inside a row, so results are
-//! bit-identical whatever the thread count. Kernel matrices are kept from the forward pass for
-//! the backward pass when they fit in [`Flow::cache_budget`]; otherwise the backward pass
-//! recomputes them, still with one exponential per unordered pair.
+//! Both passes sum over pairs with [`PairSweep`]: one kernel evaluation per unordered pair and
+//! step in each pass, in parallel tiles reduced in a fixed order, so results are bit-identical
+//! whatever the thread count. The kernel values are recomputed in the backward pass: that
+//! costs less than storing `N·k²/2` numbers and reading them back.
 
-use crate::kernel::{GaussianKernel, KernelMatrix, Soa3, ROW_CHUNK};
+use crate::kernel::{F64x4, GaussianKernel, PairSweep, PairTerms, LANES};
 use crate::{Error, Result, Vec3};
-use rayon::prelude::*;
-
-/// Lanes of the explicit multi-accumulator sums (lets the compiler use SIMD registers while
-/// keeping a fixed order of additions).
-const LANES: usize = 4;
 
 /// Parameters of the flow.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -45,8 +40,8 @@ pub struct Flow {
 /// What the forward pass leaves for the backward pass and for reporting.
 #[derive(Clone, Debug)]
 pub struct Trajectory {
-    positions: Vec<Soa3>,
-    kernels: Vec<KernelMatrix>,
+    /// `q^n`, `n = 0 … N`.
+    positions: Vec<Vec<Vec3>>,
     kinetic: f64,
 }
 
@@ -58,7 +53,7 @@ impl Trajectory {
 
     /// Landmark positions `q^n`.
     pub fn positions(&self, n: usize) -> Vec<Vec3> {
-        self.positions[n].to_points()
+        self.positions[n].clone()
     }
 
     /// Landmark positions `q^N`.
@@ -80,7 +75,9 @@ impl Flow {
     pub fn new(params: FlowParams, landmarks: usize) -> Result<Self> {
         let kernel = GaussianKernel::new(params.sigma)?;
         if params.time_steps == 0 {
-            return Err(Error::InvalidParameter("time_steps must be at least 1".into()));
+            return Err(Error::InvalidParameter(
+                "time_steps must be at least 1".into(),
+            ));
         }
         if !(params.kinetic_weight.is_finite() && params.kinetic_weight >= 0.0) {
             return Err(Error::InvalidParameter(format!(
@@ -138,13 +135,10 @@ impl Flow {
         self.steps * self.landmarks * 3
     }
 
-    fn keeps_kernels(&self) -> bool {
-        KernelMatrix::bytes_for(self.landmarks).saturating_mul(self.steps) <= self.cache_budget
-    }
-
-    fn step_controls(&self, u: &[f64], n: usize) -> Soa3 {
+    /// The controls `u^n` within the flat control vector.
+    fn step_controls<'u>(&self, u: &'u [f64], n: usize) -> &'u [f64] {
         let k3 = self.landmarks * 3;
-        Soa3::from_flat(&u[n * k3..(n + 1) * k3])
+        &u[n * k3..(n + 1) * k3]
     }
 
     /// Checks the sizes of a template and a control vector.
@@ -169,39 +163,34 @@ impl Flow {
     /// The forward pass from the template `q0` under the controls `u`.
     pub fn shoot(&self, q0: &[Vec3], u: &[f64]) -> Result<Trajectory> {
         self.check_sizes(q0, u)?;
-        let k = self.landmarks;
         let dt = self.dt();
-        let keep = self.keeps_kernels();
+        let mut sweep = PairSweep::new(&self.kernel, self.landmarks);
         let mut positions = Vec::with_capacity(self.steps + 1);
-        positions.push(Soa3::from_points(q0));
-        let mut kernels = Vec::with_capacity(if keep { self.steps } else { 0 });
-        let mut scratch = KernelMatrix::default();
+        positions.push(q0.to_vec());
         let mut kinetic = 0.0;
         for n in 0..self.steps {
-            let un = self.step_controls(u, n);
-            let q = &positions[n];
-            let kmat = if keep {
-                kernels.push(KernelMatrix::default());
-                kernels.last_mut().expect("just pushed")
-            } else {
-                &mut scratch
-            };
-            kmat.fill(&self.kernel, q);
-            let v = velocity(kmat, &un);
-            let mut next = q.clone();
-            let mut step_ke = 0.0;
-            for i in 0..k {
-                let vi = v.get(i);
-                step_ke += un.get(i).dot(&vi);
-                next.set(i, q.get(i) + dt * vi);
+            let (q, un) = (&positions[n], self.step_controls(u, n));
+            for (i, (qi, ui)) in q.iter().zip(un.chunks_exact(3)).enumerate() {
+                sweep.set_point(i, [qi.x, qi.y, qi.z, ui[0], ui[1], ui[2]]);
             }
+            sweep.run(&VelocityTerms);
+            let mut step_ke = 0.0;
+            let next = (q.iter().zip(un.chunks_exact(3)).enumerate())
+                .map(|(i, (qi, ui))| {
+                    // v_i = u_i (the pair i = j) + Σ_{j≠i} K_ij u_j.
+                    let ui = Vec3::from_column_slice(ui);
+                    let vi = ui + Vec3::from(sweep.sums(i));
+                    step_ke += ui.dot(&vi);
+                    qi + dt * vi
+                })
+                .collect();
             kinetic += 0.5 * dt * step_ke;
             positions.push(next);
         }
-        if positions.last().is_some_and(|q| !q.x.iter().chain(&q.y).chain(&q.z).all(|c| c.is_finite())) {
+        if positions.last().is_some_and(|q| !q.iter().all(|p| p.iter().all(|c| c.is_finite()))) {
             return Err(Error::NonFinite("the flow diverged: non-finite landmark positions".into()));
         }
-        Ok(Trajectory { positions, kernels, kinetic })
+        Ok(Trajectory { positions, kinetic })
     }
 
     /// The backward pass: the gradient `∂E/∂u` (written to `grad`, length `N·k·3`) of
@@ -223,135 +212,114 @@ impl Flow {
                 found: grad.len(),
             });
         }
+        if trajectory.time_points() != self.steps + 1 || trajectory.positions[0].len() != self.landmarks {
+            return Err(Error::InvalidParameter("the trajectory was not computed by this flow".into()));
+        }
         let k3 = self.landmarks * 3;
-        let mut adjoint = Soa3::from_points(terminal);
-        let mut scratch = KernelMatrix::default();
+        let mut sweep = PairSweep::new(&self.kernel, self.landmarks);
+        let mut adjoint = terminal.to_vec();
         for n in (0..self.steps).rev() {
             let q = &trajectory.positions[n];
-            let kmat = match trajectory.kernels.get(n) {
-                Some(cached) => cached,
-                None => {
-                    scratch.fill(&self.kernel, q);
-                    &scratch
-                }
-            };
-            let un = self.step_controls(u, n);
-            let step = self.adjoint_step(kmat, q, &un, &adjoint);
-            for (g, i) in grad[n * k3..(n + 1) * k3].chunks_exact_mut(3).zip(0..) {
-                g.copy_from_slice(step.grad.get(i).as_slice());
-            }
-            adjoint = step.adjoint;
+            self.adjoint_step(&mut sweep, q, self.step_controls(u, n), &mut adjoint, &mut grad[n * k3..(n + 1) * k3]);
             if n > 0 {
-                let qn = q.to_points();
-                let mut a = adjoint.to_points();
-                add_state_gradient(n, &qn, &mut a);
-                adjoint = Soa3::from_points(&a);
+                add_state_gradient(n, q, &mut adjoint);
             }
         }
         Ok(())
     }
 
-    /// One fused backward step over all rows: gradient of step `n` and the adjoint `a^n`
-    /// (before adding `∇P^n`).
-    fn adjoint_step(&self, kmat: &KernelMatrix, q: &Soa3, u: &Soa3, a: &Soa3) -> AdjointStep {
-        let k = self.landmarks;
+    /// One backward step at the positions `q = q^n` with the controls `u = u^n`: from
+    /// `a^{n+1}` (in `adjoint`), writes `∂E/∂u^n` to `grad` and leaves `a^n` without `∇Φ^n` in
+    /// `adjoint`.
+    fn adjoint_step(
+        &self,
+        sweep: &mut PairSweep<12, 6>,
+        q: &[Vec3],
+        u: &[f64],
+        adjoint: &mut [Vec3],
+        grad: &mut [f64],
+    ) {
         let dt = self.dt();
         let w = self.kinetic_weight;
-        let c = dt / (self.kernel.sigma() * self.kernel.sigma());
-        let mut grad = Soa3::zeros(k);
-        let mut next = Soa3::zeros(k);
-        let rows: Vec<(Vec3, Vec3)> = (0..k)
-            .into_par_iter()
-            .with_min_len(ROW_CHUNK)
-            .map(|i| {
-                let (g, r) = adjoint_row(kmat.row(i), i, q, u, a, w);
-                (dt * g, a.get(i) - c * r)
-            })
-            .collect();
-        for (i, (g, an)) in rows.into_iter().enumerate() {
-            grad.set(i, g);
-            next.set(i, an);
+        // (dt/σ²) Σ_j K_ij s_ij (q_i − q_j), with the differences in the sweep's length unit ℓ.
+        let c = dt / (self.kernel.sigma() * self.kernel.sigma()) * sweep.length_unit();
+        let b = |a: &Vec3, u: &[f64]| a + w * Vec3::from_column_slice(u);
+        for (i, ((qi, ui), ai)) in q.iter().zip(u.chunks_exact(3)).zip(&*adjoint).enumerate() {
+            let bi = b(ai, ui);
+            sweep.set_point(i, [qi.x, qi.y, qi.z, ui[0], ui[1], ui[2], ai.x, ai.y, ai.z, bi.x, bi.y, bi.z]);
         }
-        AdjointStep { grad, adjoint: next }
-    }
-}
-
-struct AdjointStep {
-    grad: Soa3,
-    adjoint: Soa3,
-}
-
-/// `v_i = Σ_j K_ij u_j` for every row, in parallel.
-fn velocity(kmat: &KernelMatrix, u: &Soa3) -> Soa3 {
-    let k = u.len();
-    let rows: Vec<Vec3> =
-        (0..k).into_par_iter().with_min_len(ROW_CHUNK).map(|i| velocity_row(kmat.row(i), u)).collect();
-    Soa3::from_points(&rows)
-}
-
-/// `Σ_j K_ij u_j` for one row, with `LANES` independent accumulators per coordinate.
-#[inline]
-fn velocity_row(row: &[f64], u: &Soa3) -> Vec3 {
-    let mut acc = [[0.0f64; LANES]; 3];
-    let n = row.len() / LANES * LANES;
-    for (((kc, xc), yc), zc) in row[..n]
-        .chunks_exact(LANES)
-        .zip(u.x[..n].chunks_exact(LANES))
-        .zip(u.y[..n].chunks_exact(LANES))
-        .zip(u.z[..n].chunks_exact(LANES))
-    {
-        for l in 0..LANES {
-            acc[0][l] += kc[l] * xc[l];
-            acc[1][l] += kc[l] * yc[l];
-            acc[2][l] += kc[l] * zc[l];
+        sweep.run(&AdjointTerms);
+        for (i, ((gi, ui), ai)) in grad.chunks_exact_mut(3).zip(u.chunks_exact(3)).zip(adjoint).enumerate() {
+            let [gx, gy, gz, rx, ry, rz] = sweep.sums(i);
+            // The pair i = j adds b_i to g_i and nothing to r_i.
+            let g = b(ai, ui) + Vec3::new(gx, gy, gz);
+            gi.copy_from_slice((dt * g).as_slice());
+            *ai -= c * Vec3::new(rx, ry, rz);
         }
     }
-    let mut v = Vec3::new(lane_sum(&acc[0]), lane_sum(&acc[1]), lane_sum(&acc[2]));
-    for j in n..row.len() {
-        v += row[j] * u.get(j);
-    }
-    v
 }
 
-/// For row `i`: `(Σ_j K_ij (a_j + w u_j), Σ_j K_ij s_ij (q_i − q_j))` with
-/// `s_ij = a_i·u_j + a_j·u_i + w u_i·u_j`.
-#[inline]
-fn adjoint_row(row: &[f64], i: usize, q: &Soa3, u: &Soa3, a: &Soa3, w: f64) -> (Vec3, Vec3) {
-    let (qi, ui, ai) = (q.get(i), u.get(i), a.get(i));
-    // g: 3 sums, r: 3 sums, each in LANES accumulators. Differences q_i − q_j are formed per
-    // pair (not q_i Σ K s − Σ K s q_j) to avoid cancellation far from the origin.
-    let mut acc = [[0.0f64; LANES]; 6];
-    let pair = |j: usize, acc: &mut [[f64; LANES]; 6], l: usize| {
-        let kij = row[j];
-        let (ux, uy, uz) = (u.x[j], u.y[j], u.z[j]);
-        let (ax, ay, az) = (a.x[j], a.y[j], a.z[j]);
-        acc[0][l] += kij * (ax + w * ux);
-        acc[1][l] += kij * (ay + w * uy);
-        acc[2][l] += kij * (az + w * uz);
-        let s = ai.x * ux + ai.y * uy + ai.z * uz + ax * ui.x + ay * ui.y + az * ui.z
-            + w * (ui.x * ux + ui.y * uy + ui.z * uz);
-        let ks = kij * s;
-        acc[3][l] += ks * (qi.x - q.x[j]);
-        acc[4][l] += ks * (qi.y - q.y[j]);
-        acc[5][l] += ks * (qi.z - q.z[j]);
-    };
-    let n = row.len() / LANES * LANES;
-    for base in (0..n).step_by(LANES) {
-        for l in 0..LANES {
-            pair(base + l, &mut acc, l);
+/// Field `f` of the [`LANES`] points of a chunk.
+#[inline(always)]
+fn field<V: F64x4>(chunk: &[f64], f: usize) -> V {
+    V::load(&chunk[LANES * f..])
+}
+
+/// Fields `f … f + 2` (a vector) of point `row`, in every lane.
+#[inline(always)]
+fn splat3<V: F64x4>(row: &[f64], f: usize) -> [V; 3] {
+    [V::splat(row[f]), V::splat(row[f + 1]), V::splat(row[f + 2])]
+}
+
+/// The velocity terms `K_ij u_j`; a point carries `(q, u)`.
+struct VelocityTerms;
+
+impl PairTerms<6, 3> for VelocityTerms {
+    #[inline(always)]
+    fn accumulate<V: F64x4>(
+        &self,
+        row: &[f64; 6],
+        chunk: &[f64],
+        kernel: V,
+        _d: &[V; 3],
+        row_sums: &mut [V; 3],
+        col_sums: &mut [f64],
+    ) {
+        let ui: [V; 3] = splat3(row, 3);
+        for c in 0..3 {
+            row_sums[c] = kernel.mul_add(field(chunk, 3 + c), row_sums[c]);
+            kernel.mul_add_to(ui[c], &mut col_sums[LANES * c..]);
         }
     }
-    for j in n..row.len() {
-        pair(j, &mut acc, 0);
-    }
-    let sum = |c: usize| lane_sum(&acc[c]);
-    let g = Vec3::new(sum(0), sum(1), sum(2));
-    let r = Vec3::new(sum(3), sum(4), sum(5));
-    (g, r)
 }
 
-/// Sum of lanes in a fixed order.
-#[inline]
-fn lane_sum(lanes: &[f64; LANES]) -> f64 {
-    (lanes[0] + lanes[1]) + (lanes[2] + lanes[3])
+/// The adjoint terms `K_ij b_j` (gradient) and `K_ij s_ij (q_i − q_j)` (adjoint update) with
+/// `b = a + w u` and `s_ij = a_i·u_j + a_j·u_i + w u_i·u_j = a_i·u_j + u_i·b_j` (symmetric);
+/// a point carries `(q, u, a, b)`.
+struct AdjointTerms;
+
+impl PairTerms<12, 6> for AdjointTerms {
+    #[inline(always)]
+    fn accumulate<V: F64x4>(
+        &self,
+        row: &[f64; 12],
+        chunk: &[f64],
+        kernel: V,
+        d: &[V; 3],
+        row_sums: &mut [V; 6],
+        col_sums: &mut [f64],
+    ) {
+        let (ui, ai, bi): ([V; 3], [V; 3], [V; 3]) = (splat3(row, 3), splat3(row, 6), splat3(row, 9));
+        let uj: [V; 3] = [field(chunk, 3), field(chunk, 4), field(chunk, 5)];
+        let bj: [V; 3] = [field(chunk, 9), field(chunk, 10), field(chunk, 11)];
+        let a_dot_u = ai[2].mul_add(uj[2], ai[1].mul_add(uj[1], ai[0] * uj[0]));
+        let s = ui[2].mul_add(bj[2], ui[1].mul_add(bj[1], ui[0].mul_add(bj[0], a_dot_u)));
+        let ks = kernel * s;
+        for c in 0..3 {
+            row_sums[c] = kernel.mul_add(bj[c], row_sums[c]);
+            kernel.mul_add_to(bi[c], &mut col_sums[LANES * c..]);
+            row_sums[3 + c] = ks.mul_add(d[c], row_sums[3 + c]);
+            ks.neg_mul_add_to(d[c], &mut col_sums[LANES * (3 + c)..]);
+        }
+    }
 }
