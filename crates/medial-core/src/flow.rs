@@ -163,6 +163,13 @@ impl Flow {
     /// The forward pass from the template `q0` under the controls `u`.
     pub fn shoot(&self, q0: &[Vec3], u: &[f64]) -> Result<Trajectory> {
         self.check_sizes(q0, u)?;
+        // On a worker thread of the pool, each step's parallel sweep starts without handing the
+        // work over to the pool and waiting for it (two thread switches per step).
+        rayon::scope(|_| self.forward_steps(q0, u))
+    }
+
+    /// The steps of [`Flow::shoot`].
+    fn forward_steps(&self, q0: &[Vec3], u: &[f64]) -> Result<Trajectory> {
         let dt = self.dt();
         let mut sweep = PairSweep::new(&self.kernel, self.landmarks);
         let mut positions = Vec::with_capacity(self.steps + 1);
@@ -187,21 +194,27 @@ impl Flow {
             kinetic += 0.5 * dt * step_ke;
             positions.push(next);
         }
-        if positions.last().is_some_and(|q| !q.iter().all(|p| p.iter().all(|c| c.is_finite()))) {
-            return Err(Error::NonFinite("the flow diverged: non-finite landmark positions".into()));
+        if positions
+            .last()
+            .is_some_and(|q| !q.iter().all(|p| p.iter().all(|c| c.is_finite())))
+        {
+            return Err(Error::NonFinite(
+                "the flow diverged: non-finite landmark positions".into(),
+            ));
         }
         Ok(Trajectory { positions, kinetic })
     }
 
     /// The backward pass: the gradient `∂E/∂u` (written to `grad`, length `N·k·3`) of
     /// `E = w_kin·KE + Φ(q^1, …, q^N)` given `∂Φ/∂q^N` (`terminal`) and a callback that adds
-    /// `∂Φ/∂q^n` to the adjoint for `n = N−1 … 1` (called once per time point, in that order).
+    /// `∂Φ/∂q^n` to the adjoint for `n = N−1 … 1` (called once per time point, in that order,
+    /// on a thread of the rayon pool).
     pub fn backward(
         &self,
         trajectory: &Trajectory,
         u: &[f64],
         terminal: &[Vec3],
-        mut add_state_gradient: impl FnMut(usize, &[Vec3], &mut [Vec3]),
+        add_state_gradient: impl FnMut(usize, &[Vec3], &mut [Vec3]) + Send,
         grad: &mut [f64],
     ) -> Result<()> {
         self.check_sizes(terminal, u)?;
@@ -212,20 +225,43 @@ impl Flow {
                 found: grad.len(),
             });
         }
-        if trajectory.time_points() != self.steps + 1 || trajectory.positions[0].len() != self.landmarks {
-            return Err(Error::InvalidParameter("the trajectory was not computed by this flow".into()));
+        if trajectory.time_points() != self.steps + 1
+            || trajectory.positions[0].len() != self.landmarks
+        {
+            return Err(Error::InvalidParameter(
+                "the trajectory was not computed by this flow".into(),
+            ));
         }
+        // On a worker thread of the pool, as in `shoot`.
+        rayon::scope(|_| self.backward_steps(trajectory, u, terminal, add_state_gradient, grad));
+        Ok(())
+    }
+
+    /// The steps of [`Flow::backward`].
+    fn backward_steps(
+        &self,
+        trajectory: &Trajectory,
+        u: &[f64],
+        terminal: &[Vec3],
+        mut add_state_gradient: impl FnMut(usize, &[Vec3], &mut [Vec3]),
+        grad: &mut [f64],
+    ) {
         let k3 = self.landmarks * 3;
         let mut sweep = PairSweep::new(&self.kernel, self.landmarks);
         let mut adjoint = terminal.to_vec();
         for n in (0..self.steps).rev() {
             let q = &trajectory.positions[n];
-            self.adjoint_step(&mut sweep, q, self.step_controls(u, n), &mut adjoint, &mut grad[n * k3..(n + 1) * k3]);
+            self.adjoint_step(
+                &mut sweep,
+                q,
+                self.step_controls(u, n),
+                &mut adjoint,
+                &mut grad[n * k3..(n + 1) * k3],
+            );
             if n > 0 {
                 add_state_gradient(n, q, &mut adjoint);
             }
         }
-        Ok(())
     }
 
     /// One backward step at the positions `q = q^n` with the controls `u = u^n`: from
@@ -246,10 +282,20 @@ impl Flow {
         let b = |a: &Vec3, u: &[f64]| a + w * Vec3::from_column_slice(u);
         for (i, ((qi, ui), ai)) in q.iter().zip(u.chunks_exact(3)).zip(&*adjoint).enumerate() {
             let bi = b(ai, ui);
-            sweep.set_point(i, [qi.x, qi.y, qi.z, ui[0], ui[1], ui[2], ai.x, ai.y, ai.z, bi.x, bi.y, bi.z]);
+            sweep.set_point(
+                i,
+                [
+                    qi.x, qi.y, qi.z, ui[0], ui[1], ui[2], ai.x, ai.y, ai.z, bi.x, bi.y, bi.z,
+                ],
+            );
         }
         sweep.run(&AdjointTerms);
-        for (i, ((gi, ui), ai)) in grad.chunks_exact_mut(3).zip(u.chunks_exact(3)).zip(adjoint).enumerate() {
+        for (i, ((gi, ui), ai)) in grad
+            .chunks_exact_mut(3)
+            .zip(u.chunks_exact(3))
+            .zip(adjoint)
+            .enumerate()
+        {
             let [gx, gy, gz, rx, ry, rz] = sweep.sums(i);
             // The pair i = j adds b_i to g_i and nothing to r_i.
             let g = b(ai, ui) + Vec3::new(gx, gy, gz);
@@ -309,7 +355,8 @@ impl PairTerms<12, 6> for AdjointTerms {
         row_sums: &mut [V; 6],
         col_sums: &mut [f64],
     ) {
-        let (ui, ai, bi): ([V; 3], [V; 3], [V; 3]) = (splat3(row, 3), splat3(row, 6), splat3(row, 9));
+        let (ui, ai, bi): ([V; 3], [V; 3], [V; 3]) =
+            (splat3(row, 3), splat3(row, 6), splat3(row, 9));
         let uj: [V; 3] = [field(chunk, 3), field(chunk, 4), field(chunk, 5)];
         let bj: [V; 3] = [field(chunk, 9), field(chunk, 10), field(chunk, 11)];
         let a_dot_u = ai[2].mul_add(uj[2], ai[1].mul_add(uj[1], ai[0] * uj[0]));

@@ -21,10 +21,10 @@ pub(crate) const LANES: usize = 4;
 
 pub(crate) use lanes::{F64x4, Real};
 
-/// Rows (and columns) of a block of the pair sweep. A tile of 64 × 64 pairs keeps its data
-/// and column sums (a few KiB) in the L1 cache, and a problem of a few hundred landmarks
-/// still has tens of tiles to share between threads.
-const BLOCK: usize = 64;
+/// Smallest and largest number of rows (and columns) of a block of the pair sweep. Small
+/// blocks give a problem of a few hundred landmarks tens of tiles to share between threads;
+/// large blocks make fewer partial sums to store and reduce when there are thousands.
+const BLOCK_RANGE: (usize, usize) = (64, 256);
 
 /// Gaussian kernel of width `σ` (same unit as the coordinates).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -234,22 +234,19 @@ pub(crate) struct PairSweep<const F: usize, const C: usize> {
     /// The kernel's length unit `ℓ`: the sweep works on the coordinates `q/ℓ`.
     unit: f64,
     points: Vec<f64>,
-    /// Per tile, the partial sums of its rows, then those of its columns (`C·BLOCK` each).
+    /// Per tile, the partial sums of its rows, then those of its columns (`C·block` each).
     partials: Vec<f64>,
     sums: Vec<f64>,
 }
 
 impl<const F: usize, const C: usize> PairSweep<F, C> {
-    /// Numbers of one tile's buffer.
-    const TILE_LEN: usize = 2 * C * BLOCK;
-
     /// A sweep of `kernel` over `landmarks` points, all zero.
     pub(crate) fn new(kernel: &GaussianKernel, landmarks: usize) -> Self {
         let tiling = Tiling::new(landmarks);
         Self {
             unit: kernel.length_unit(),
             points: vec![0.0; tiling.padded * F],
-            partials: vec![0.0; tiling.tiles.len() * Self::TILE_LEN],
+            partials: vec![0.0; tiling.tiles.len() * 2 * C * tiling.block],
             sums: vec![0.0; tiling.padded * C],
             tiling,
         }
@@ -280,21 +277,37 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
     /// Computes the sums for the current points: the tiles in parallel, then for each block of
     /// rows the partial sums of its tiles in a fixed order.
     pub(crate) fn run<T: PairTerms<F, C>>(&mut self, terms: &T) {
-        let Self { tiling, points, partials, sums, .. } = self;
+        let Self {
+            tiling,
+            points,
+            partials,
+            sums,
+            ..
+        } = self;
         let points = &points[..];
-        partials.par_chunks_mut(Self::TILE_LEN).zip(&tiling.tiles).for_each(|(buf, &(bi, bj))| {
-            let tile = Tile { rows: tiling.range(bi), cols: tiling.range(bj) };
-            sweep_tile(points, terms, &tile, buf);
-        });
+        let part_len = C * tiling.block;
+        partials
+            .par_chunks_mut(2 * part_len)
+            .zip(&tiling.tiles)
+            .for_each(|(buf, &(bi, bj))| {
+                let tile = Tile {
+                    rows: tiling.range(bi),
+                    cols: tiling.range(bj),
+                };
+                sweep_tile(points, terms, &tile, buf);
+            });
         let partials = &partials[..];
-        sums.par_chunks_mut(C * BLOCK)
+        // Blocks per reduction task: enough additions to be worth a task of its own.
+        let min_blocks = (1 << 16) / (part_len * tiling.blocks).max(1);
+        sums.par_chunks_mut(part_len)
             .enumerate()
+            .with_min_len(min_blocks.max(1))
             .for_each(|(bi, block_sums)| {
                 block_sums.fill(0.0);
                 for bj in 0..tiling.blocks {
                     let t = tiling.tile_index(bi.min(bj), bi.max(bj));
                     let (row_part, col_part) =
-                        partials[t * Self::TILE_LEN..(t + 1) * Self::TILE_LEN].split_at(C * BLOCK);
+                        partials[2 * t * part_len..2 * (t + 1) * part_len].split_at(part_len);
                     if bj >= bi {
                         add_assign(block_sums, row_part);
                     }
@@ -311,11 +324,15 @@ fn add_assign(sums: &mut [f64], part: &[f64]) {
     sums.iter_mut().zip(part).for_each(|(s, p)| *s += p);
 }
 
-/// The cut of the padded index range into blocks of [`BLOCK`] (the last one shorter), and the
-/// tiles (I, J), I ≤ J, row-major.
+/// The cut of the padded index range into blocks (the last one shorter), and the tiles (I, J),
+/// I ≤ J, row-major.
 #[derive(Clone, Debug)]
 struct Tiling {
     padded: usize,
+    /// Rows of a block: a power of two in [`BLOCK_RANGE`], about a sixteenth of the points. It
+    /// depends on the number of points only, so that the order of the sums does not depend on
+    /// the number of threads.
+    block: usize,
     blocks: usize,
     tiles: Vec<(usize, usize)>,
 }
@@ -323,12 +340,16 @@ struct Tiling {
 impl Tiling {
     fn new(landmarks: usize) -> Self {
         let padded = landmarks.div_ceil(LANES) * LANES;
-        let blocks = padded.div_ceil(BLOCK);
+        let block = (padded / 16)
+            .next_power_of_two()
+            .clamp(BLOCK_RANGE.0, BLOCK_RANGE.1);
+        let blocks = padded.div_ceil(block);
         let tiles = (0..blocks)
             .flat_map(|bi| (bi..blocks).map(move |bj| (bi, bj)))
             .collect();
         Self {
             padded,
+            block,
             blocks,
             tiles,
         }
@@ -336,7 +357,7 @@ impl Tiling {
 
     /// Indices of block `b`.
     fn range(&self, b: usize) -> Range<usize> {
-        b * BLOCK..((b + 1) * BLOCK).min(self.padded)
+        b * self.block..((b + 1) * self.block).min(self.padded)
     }
 
     /// Position of tile (bi, bj), bi ≤ bj, in the row-major list: `bi·blocks − bi(bi+1)/2 + bj`.
@@ -353,7 +374,12 @@ struct Tile {
 
 /// The partial sums of one tile into `buf` (see [`PairSweep::partials`]), with the fastest
 /// code the CPU supports.
-fn sweep_tile<const F: usize, const C: usize, T: PairTerms<F, C>>(points: &[f64], terms: &T, tile: &Tile, buf: &mut [f64]) {
+fn sweep_tile<const F: usize, const C: usize, T: PairTerms<F, C>>(
+    points: &[f64],
+    terms: &T,
+    tile: &Tile,
+    buf: &mut [f64],
+) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: the running CPU supports AVX2 and FMA, checked just above.
@@ -396,13 +422,19 @@ fn sweep_tile_with<const F: usize, const C: usize, T: PairTerms<F, C>, V: F64x4>
 /// a time. Row sums are kept in LANES accumulators per sum and added in a fixed order; column
 /// sums are accumulated in `buf` row after row.
 #[inline(always)]
-fn sweep_tile_body<const F: usize, const C: usize, T: PairTerms<F, C>, V: F64x4, const DIAGONAL: bool>(
+fn sweep_tile_body<
+    const F: usize,
+    const C: usize,
+    T: PairTerms<F, C>,
+    V: F64x4,
+    const DIAGONAL: bool,
+>(
     points: &[f64],
     terms: &T,
     tile: &Tile,
     buf: &mut [f64],
 ) {
-    let (row_sums, col_sums) = buf.split_at_mut(C * BLOCK);
+    let (row_sums, col_sums) = buf.split_at_mut(buf.len() / 2);
     col_sums.fill(0.0);
     let columns = &points[tile.cols.start * F..tile.cols.end * F];
     for (r, i) in tile.rows.clone().enumerate() {
@@ -414,11 +446,19 @@ fn sweep_tile_body<const F: usize, const C: usize, T: PairTerms<F, C>, V: F64x4,
         let qi = [V::splat(row[0]), V::splat(row[1]), V::splat(row[2])];
         let mut acc = [V::splat(0.0); C];
         // On a diagonal tile, start at the chunk holding i + 1 and mask its lanes j ≤ i.
-        let first = if DIAGONAL { (i + 1 - tile.cols.start) / LANES } else { 0 };
+        let first = if DIAGONAL {
+            (i + 1 - tile.cols.start) / LANES
+        } else {
+            0
+        };
         let chunks = columns[first * LANES * F..].chunks_exact(LANES * F);
         let sums = col_sums[first * LANES * C..].chunks_exact_mut(LANES * C);
         for (n, (chunk, sums)) in (first..).zip(chunks.zip(sums)) {
-            let qj = [V::load(chunk), V::load(&chunk[LANES..]), V::load(&chunk[2 * LANES..])];
+            let qj = [
+                V::load(chunk),
+                V::load(&chunk[LANES..]),
+                V::load(&chunk[2 * LANES..]),
+            ];
             let d = [qi[0] - qj[0], qi[1] - qj[1], qi[2] - qj[2]];
             let mut kij = exp_neg(d[2].mul_add(d[2], d[1].mul_add(d[1], d[0] * d[0])));
             let j = tile.cols.start + n * LANES;
