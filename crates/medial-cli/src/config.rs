@@ -40,8 +40,6 @@ pub struct FlowConfig {
     pub time_steps: usize,
     /// Weight of the kinetic energy.
     pub kinetic_weight: f64,
-    /// Memory (MiB) allowed for keeping kernel matrices between the forward and backward pass.
-    pub kernel_cache_mib: usize,
 }
 
 impl Default for FlowConfig {
@@ -50,7 +48,6 @@ impl Default for FlowConfig {
             sigma: 2.0,
             time_steps: 40,
             kinetic_weight: 0.05,
-            kernel_cache_mib: 2048,
         }
     }
 }

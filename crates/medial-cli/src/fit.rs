@@ -30,7 +30,7 @@ pub fn flow_of(config: &Config, landmarks: usize) -> Result<Flow, CliError> {
         time_steps: f.time_steps,
         kinetic_weight: f.kinetic_weight,
     };
-    Ok(Flow::new(params, landmarks)?.with_cache_budget(f.kernel_cache_mib.saturating_mul(1 << 20)))
+    Ok(Flow::new(params, landmarks)?)
 }
 
 /// Runs `config` and writes everything into `options.out`.
