@@ -338,8 +338,8 @@ fn prisms_tile_the_real_template_under_perturbations() {
 }
 
 /// (a) Against a smooth image (σ = 1 mm, 2 voxels) the attachment's Dice matches the voxel
-/// Dice `2 Σ_{v ∈ model} f_v / (Σ model + Σ f)` of the rasterized model, and gets closer with a
-/// finer sampling (the corner quadrature across layers is a trapezoidal rule).
+/// Dice `2 Σ_{v ∈ model} f_v / (Σ model + Σ f)` of the rasterized model, and the default
+/// sampling has already converged: a finer one changes it by less than 0.001.
 #[test]
 fn dice_matches_the_voxel_overlap_of_the_rasterized_model() {
     let disc = thick_disc(5, 10.0, 4.0);
@@ -370,14 +370,14 @@ fn dice_matches_the_voxel_overlap_of_the_rasterized_model() {
         assert_eq!(v.image_volume, image_volume);
         errors.push((v.dice - reference).abs());
     }
-    assert!(errors[0] < 0.01, "{errors:?}");
-    assert!(errors[1] < 0.6 * errors[0], "{errors:?}");
+    assert!(errors.iter().all(|&e| e < 0.01), "{errors:?}");
+    assert!((errors[0] - errors[1]).abs() < 1e-3, "{errors:?}");
 }
 
-/// (b) A model against the smoothed (0.2 mm) rasterization of itself at 0.5 mm voxels. The
-/// estimate is biased low: boundary samples sit on the image edge (f ≈ 1/2) and carry a sixth
-/// of the outer prisms, about `1/(4·layers)` of a slab's volume, plus the blur of the edge
-/// (≈ 0.13 mm × area / volume). Default sampling: ≥ 0.92; fine sampling of a fat object: ≥ 0.98.
+/// (b) A model against the smoothed (0.2 mm) rasterization of itself at 0.5 mm voxels scores
+/// ≥ 0.98 at every sampling, the finer ones converging (to within 0.002) on the exact overlap
+/// of the blurred image, `1 − ∫_model (1 − f) / V` (the blur of the edge: about 0.14 mm × area /
+/// volume). SPEC §5's corner rule scored 0.927 here at the default sampling.
 #[test]
 fn a_model_matches_its_own_rasterization() {
     let disc = thick_disc(6, 24.0, 12.0);
@@ -407,14 +407,13 @@ fn a_model_matches_its_own_rasterization() {
         );
         dice.push(v.dice);
     }
-    assert!(
-        dice[0] >= 0.92 && dice[0] < dice[1] && dice[1] < dice[2],
-        "{dice:?}"
-    );
-    assert!(dice[2] >= 0.98, "{dice:?}");
+    assert!(dice.iter().all(|&d| d >= 0.98), "{dice:?}");
+    assert!((dice[1] - dice[2]).abs() < 2e-3, "{dice:?}");
 }
 
-/// The cmrep template against its own rasterization, and the timing of one evaluation.
+/// The cmrep template against its own rasterization, and the timing of one evaluation. t001 is
+/// thin (mean spoke 1.4 mm, area / volume ≈ 1 /mm, under six 0.5 mm voxels across), so the blur
+/// of the image edge costs it about 0.09 (SPEC §5's corner rule: 0.893).
 #[test]
 fn the_real_template_against_its_own_rasterization() {
     let model = t001();
@@ -429,7 +428,7 @@ fn the_real_template_against_its_own_rasterization() {
     let mut grad = vec![Vec3::zeros(); model.q.len()];
     let v = dice.evaluate(&model.q, Some(&mut grad)).unwrap();
     println!("t001 vs itself: {v:?}");
-    assert!(v.dice > 0.88, "{v:?}");
+    assert!(v.dice > 0.9, "{v:?}");
     // Shortest of repeated runs (robust to a loaded machine): CPU time of the one worker
     // thread with 1 thread, wall time with 2.
     for threads in [1, 2] {
