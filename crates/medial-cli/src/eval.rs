@@ -2,7 +2,7 @@
 
 use crate::config::Config;
 use crate::error::CliError;
-use crate::fit::{figures_at, flow_of};
+use crate::fit::{end_figures, flow_of};
 use crate::model::Model;
 use crate::report::Figures;
 use crate::stage;
@@ -67,12 +67,7 @@ pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> 
     if let (Some(path), Some(g)) = (&options.gradient, &gradient) {
         medial_io::npy::write_npy(path, &[steps, k, 3], g)?;
     }
-    Ok(figures_at(
-        &model,
-        &prepared,
-        &evaluation,
-        &evaluation.final_positions,
-    ))
+    end_figures(&model, &prepared, &evaluation)
 }
 
 /// Reads a `.npy` array and checks its shape.

@@ -89,12 +89,7 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         if let Some(e) = log_error {
             return Err(e);
         }
-        let figures = figures_at(
-            &model,
-            prepared,
-            &outcome.evaluation,
-            &outcome.evaluation.final_positions,
-        );
+        let figures = end_figures(&model, prepared, &outcome.evaluation)?;
         progress.println(&format!(
             "stage '{}': {} iterations, {} evaluations, {:.1} s, total {:.6e}, stop: {}",
             cfg.name,
@@ -159,6 +154,20 @@ pub fn figures_at(
         metrics.as_ref(),
         prepared.ssd.as_ref().map(|s| s.mean_distance(q)),
     )
+}
+
+/// The figures at the end of a stage: [`figures_at`] the end of the flow, with the voxel
+/// overlap of Dice stages.
+pub fn end_figures(
+    model: &Model,
+    prepared: &Prepared,
+    e: &medial_core::objective::Evaluation,
+) -> Result<Figures, CliError> {
+    let q = &e.final_positions;
+    Ok(Figures {
+        voxel_dice: prepared.voxel_dice(model, q)?,
+        ..figures_at(model, prepared, e, q)
+    })
 }
 
 /// `momenta.npy`, the model at every time point under `flow/`, and the fitted model.

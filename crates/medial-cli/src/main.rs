@@ -11,6 +11,7 @@ mod rasterize_cmd;
 mod report;
 mod stage;
 mod synth_cmd;
+mod warp_cmd;
 
 use clap::{Parser, Subcommand};
 use error::CliError;
@@ -72,6 +73,10 @@ enum Command {
     /// Write a synthetic case (template, target segmentation from a known deformation,
     /// affine initialisation, fit.toml) into a folder.
     Synth(synth_cmd::SynthArgs),
+    /// Turn any cmrep template into a synthetic case: a known twist + bend (about its long
+    /// principal axis) + affine warp; writes the template, the warped boundary points, the
+    /// rasterized target, the affine part, fit_boundary.toml and fit.toml into a folder.
+    Warp(warp_cmd::WarpArgs),
     /// Rasterize a closed triangle mesh into a binary NIfTI mask.
     Rasterize(rasterize_cmd::RasterizeArgs),
 }
@@ -147,6 +152,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
         Command::Inflate(args) => inflate_cmd::run(&args)?,
         Command::Project(args) => project_cmd::run(&args)?,
         Command::Synth(args) => synth_cmd::run(&args)?,
+        Command::Warp(args) => warp_cmd::run(&args)?,
         Command::Rasterize(args) => rasterize_cmd::run(&args)?,
     }
     Ok(())

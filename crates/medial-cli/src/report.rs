@@ -26,6 +26,10 @@ pub struct Figures {
     /// Dice estimate, for Dice stages.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub dice: Option<f64>,
+    /// Dice stages, at the end of a stage: the voxel overlap `2|M ∩ A| / (|M| + |A|)` of the
+    /// rasterized model `M` with the binary foreground `A` of the image, on the image's grid.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub voxel_dice: Option<f64>,
     /// Mean distance to the SSD targets (mm), for SSD stages.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mean_distance: Option<f64>,
@@ -50,6 +54,7 @@ impl Figures {
             penalty: e.penalty,
             max_abs_constraint: e.max_abs_constraint,
             dice: e.dice,
+            voxel_dice: None,
             mean_distance,
             max_spoke_normal_deg: metrics.map(|m| m.max_spoke_normal_deg),
             mean_spoke_normal_deg: metrics.map(|m| m.mean_spoke_normal_deg),

@@ -9,7 +9,9 @@ use medial_core::attachment::ssd::Ssd;
 use medial_core::attachment::Attachment;
 use medial_core::augmented_lagrangian::{AlSchedule, MuUpdate};
 use medial_core::optimize::LbfgsOptions;
-use medial_core::Vec3;
+use medial_core::rasterize::voxel_dice;
+use medial_core::volume::Volume;
+use medial_core::{TriMesh, Vec3};
 use std::path::Path;
 
 /// A stage ready to run.
@@ -18,12 +20,30 @@ pub struct Prepared {
     pub attachment: Box<dyn Attachment>,
     /// SSD targets, to report the mean distance.
     pub ssd: Option<Ssd>,
+    /// Dice stages: the binary foreground of the image (before smoothing), to report the voxel
+    /// overlap of the rasterized model.
+    pub mask: Option<Volume>,
     /// Whether the medial constraints apply.
     pub constrained: bool,
     /// The μ schedule.
     pub schedule: AlSchedule,
     /// L-BFGS options.
     pub lbfgs: LbfgsOptions,
+}
+
+impl Prepared {
+    /// Dice stages: the voxel overlap of the model's boundary at landmarks `q` (rasterized on
+    /// the image's grid) with the image's foreground.
+    pub fn voxel_dice(&self, model: &Model, q: &[Vec3]) -> Result<Option<f64>, CliError> {
+        let (Some(mask), Some(template)) = (&self.mask, model.medial()) else {
+            return Ok(None);
+        };
+        let boundary = TriMesh::new(
+            q[..template.boundary_count()].to_vec(),
+            template.boundary_triangles().to_vec(),
+        )?;
+        Ok(Some(voxel_dice(&boundary, mask)?))
+    }
 }
 
 /// Prepares `stage` for `model`.
@@ -35,16 +55,20 @@ pub fn prepare(stage: &StageConfig, model: &Model) -> Result<Prepared, CliError>
             stage.name
         )));
     }
-    let (attachment, ssd): (Box<dyn Attachment>, Option<Ssd>) = match stage.attachment {
+    let (attachment, ssd, mask): (Box<dyn Attachment>, _, _) = match stage.attachment {
         AttachmentKind::Ssd => {
             let ssd = Ssd::new(ssd_targets(stage, model)?)?;
-            (Box::new(ssd.clone()), Some(ssd))
+            (Box::new(ssd.clone()), Some(ssd), None)
         }
-        AttachmentKind::Dice => (Box::new(dice(stage, model)?), None),
+        AttachmentKind::Dice => {
+            let (dice, mask) = dice(stage, model)?;
+            (Box::new(dice), None, Some(mask))
+        }
     };
     Ok(Prepared {
         attachment,
         ssd,
+        mask,
         constrained,
         schedule: AlSchedule {
             mu: stage.mu,
@@ -131,8 +155,9 @@ pub fn read_affine(path: &Path) -> Result<nalgebra::Affine3<f64>, CliError> {
     Ok(nalgebra::Affine3::from_matrix_unchecked(m))
 }
 
-/// The Dice attachment of a stage: the image's foreground, smoothed, against the model.
-fn dice(stage: &StageConfig, model: &Model) -> Result<DiceAttachment, CliError> {
+/// The Dice attachment of a stage (the image's foreground, smoothed, against the model) and the
+/// foreground itself.
+fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), CliError> {
     let template = model.medial().ok_or_else(|| {
         CliError::Input(format!(
             "stage '{}': the dice attachment needs a medial template (its interior is sampled between boundary and medial sheet)",
@@ -143,9 +168,8 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<DiceAttachment, CliError> 
         .image
         .as_deref()
         .expect("checked by the config: dice has image");
-    let image = read_volume(path)?
-        .foreground(stage.label)
-        .smoothed(stage.image_sigma)?;
+    let mask = read_volume(path)?.foreground(stage.label);
+    let image = mask.smoothed(stage.image_sigma)?;
     let medial_of: Vec<usize> = template
         .medial_index()
         .iter()
@@ -155,13 +179,14 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<DiceAttachment, CliError> 
         subdivision: stage.subdivision,
         layers: stage.layers,
     };
-    Ok(DiceAttachment::new(
+    let attachment = DiceAttachment::new(
         template.boundary_triangles(),
         &medial_of,
         template.landmark_count(),
         image,
         params,
-    )?)
+    )?;
+    Ok((attachment, mask))
 }
 
 /// A volume from NIfTI (`.nii`, `.nii.gz`) or OpenEXR (`.exr`).

@@ -2,10 +2,16 @@
 //! segmentation (the template's shape carried by a known diffeomorphism, rasterized), the
 //! affine part of that diffeomorphism and a ready `fit.toml` in the style of the paper (an SSD
 //! initialisation by the affine map, then Dice with μ rising from 0.001 to 10).
+//!
+//! [`CaseFiles`] (the files of a case) and [`FitPlan`] (its configs) are shared with
+//! `medial warp`, which makes the same kind of case from any template.
 
 use crate::error::CliError;
 use crate::inflate_cmd::{print_json, write_options, TemplateSummary};
 use medial_core::synth::{Shape, SyntheticCase};
+use medial_core::template::MedialTemplate;
+use medial_core::volume::Volume;
+use medial_core::TriMesh;
 use medial_io::nifti_volume::{write_nifti, NiftiType};
 use medial_io::vtk::{self, PolyData};
 use nalgebra::Matrix4;
@@ -30,40 +36,18 @@ pub struct SynthArgs {
     pub margin: f64,
 }
 
-/// The fit settings written into `fit.toml` for a case.
-struct FitPlan {
-    /// Kernel width σ, mm.
-    sigma: f64,
-    /// Time steps N.
-    time_steps: usize,
-    /// Weight of the kinetic energy.
-    kinetic_weight: f64,
-    /// Prism layers between boundary and medial sheet in the Dice estimate.
-    layers: usize,
-    /// L-BFGS iterations of the SSD initialisation.
-    ssd_iterations: usize,
-    /// L-BFGS iterations per AL iteration of the Dice stage.
-    dice_iterations: usize,
-}
-
+/// The fit settings of the built-in shapes (σ about their half thickness).
 fn plan(shape: Shape) -> FitPlan {
-    match shape {
-        Shape::Cup => FitPlan {
-            sigma: 3.0,
-            time_steps: 20,
-            kinetic_weight: 0.005,
-            layers: 10,
-            ssd_iterations: 300,
-            dice_iterations: 150,
+    FitPlan {
+        sigma: match shape {
+            Shape::Cup => 3.0,
+            Shape::Toy => 2.0,
         },
-        Shape::Toy => FitPlan {
-            sigma: 2.0,
-            time_steps: 20,
-            kinetic_weight: 0.005,
-            layers: 10,
-            ssd_iterations: 300,
-            dice_iterations: 150,
-        },
+        time_steps: 20,
+        kinetic_weight: 0.005,
+        layers: 10,
+        ssd_iterations: 300,
+        dice_iterations: 150,
     }
 }
 
@@ -90,20 +74,26 @@ pub fn run(args: &SynthArgs) -> Result<(), CliError> {
     let spacing = args.spacing.unwrap_or_else(|| shape.image_spacing_mm());
     let case = SyntheticCase::build(shape)?;
     let image = case.target_image(spacing, args.margin)?;
-    std::fs::create_dir_all(&args.out).map_err(|e| CliError::io(&args.out, e))?;
-    let out = |name: &str| args.out.join(name);
-    medial_io::cmrep::write_template(&out("template.vtk"), case.template(), write_options(false))?;
-    write_nifti(&out("target.nii.gz"), &image, NiftiType::U8)?;
-    let target_boundary = PolyData::from_trimesh(&case.target_boundary()?);
-    vtk::write_polydata(
-        &out("target_boundary.vtk"),
-        &target_boundary,
-        write_options(false),
-    )?;
-    write_text(&out("affine.txt"), &affine_text(&case.warp.affine()))?;
-    write_text(&out("fit.toml"), &fit_toml(shape, &plan(shape)))?;
+    let name = shape.name();
+    let header = format!(
+        "# Synthetic case '{name}', written by `medial synth {name}`.
+# target.nii.gz is template.vtk carried by a known twist + bend + affine map and rasterized;
+# target_boundary.vtk is the same map applied to the template's boundary points (an SSD target
+# with known correspondence); affine.txt is the affine part of the map.
+# sigma is small against the wall (half thickness 2–4 mm) so that the flow can move medial and
+# boundary points apart, as the constraints need.
+"
+    );
+    CaseFiles {
+        template: case.template(),
+        target_boundary: &case.target_boundary()?,
+        image: &image,
+        affine: case.warp.affine(),
+        configs: &[("fit.toml", plan(shape).paper_schedule(&header))],
+    }
+    .write(&args.out)?;
     print_json(&SynthSummary {
-        case: shape.name(),
+        case: name,
         out: args.out.clone(),
         template: TemplateSummary::of(case.template()),
         projection_max_displacement_mm: case.projection.max_displacement,
@@ -112,6 +102,45 @@ pub fn run(args: &SynthArgs) -> Result<(), CliError> {
         image_spacing_mm: spacing,
         target_volume_mm3: image.integral(),
     })
+}
+
+/// The files of a synthetic case, as `medial synth` and `medial warp` write them.
+pub struct CaseFiles<'a> {
+    /// Written as `template.vtk` (cmrep template, ASCII).
+    pub template: &'a MedialTemplate,
+    /// Written as `target_boundary.vtk`: the warped boundary, point for point.
+    pub target_boundary: &'a TriMesh,
+    /// Written as `target.nii.gz` (unsigned 8-bit): the rasterized target.
+    pub image: &'a Volume,
+    /// Written as `affine.txt`: the affine part of the warp (world 4×4 matrix).
+    pub affine: Matrix4<f64>,
+    /// Configs `(file name, TOML text)`.
+    pub configs: &'a [(&'a str, String)],
+}
+
+impl CaseFiles<'_> {
+    /// Creates `dir` if needed and writes every file into it, each atomically (files of the
+    /// same names are replaced).
+    pub fn write(&self, dir: &Path) -> Result<(), CliError> {
+        std::fs::create_dir_all(dir).map_err(|e| CliError::io(dir, e))?;
+        let out = |name: &str| dir.join(name);
+        medial_io::cmrep::write_template(
+            &out("template.vtk"),
+            self.template,
+            write_options(false),
+        )?;
+        write_nifti(&out("target.nii.gz"), self.image, NiftiType::U8)?;
+        vtk::write_polydata(
+            &out("target_boundary.vtk"),
+            &PolyData::from_trimesh(self.target_boundary),
+            write_options(false),
+        )?;
+        write_text(&out("affine.txt"), &affine_text(&self.affine))?;
+        for (name, text) in self.configs {
+            write_text(&out(name), text)?;
+        }
+        Ok(())
+    }
 }
 
 /// A 4×4 matrix as 4 lines of 4 numbers (the format of an SSD stage's `transform`).
@@ -124,32 +153,32 @@ fn affine_text(m: &Matrix4<f64>) -> String {
         .collect()
 }
 
-/// The case's `fit.toml`: SSD towards the affine part (μ = 1, one AL iteration), then Dice
-/// with μ = 0.001, 0.01, 0.1, 1, 10.
-fn fit_toml(shape: Shape, plan: &FitPlan) -> String {
-    format!(
-        r#"# Synthetic case '{name}', written by `medial synth {name}`.
-# target.nii.gz is template.vtk carried by a known twist + bend + affine map and rasterized;
-# target_boundary.vtk is the same map applied to the template's boundary points (an SSD target
-# with known correspondence); affine.txt is the affine part of the map.
-# As in the paper: one SSD AL iteration (mu = 1) towards the affine initialisation, then the
-# Dice attachment with mu rising from 0.001 to 10 over five AL iterations.
-# The Dice estimate gives the boundary samples (where the smoothed image is about 1/2) a sixth of
-# the outermost prisms, which biases it low by about 1/(4·layers): 10 layers instead of the
-# default 5 halve that bias. sigma is small against the wall (half thickness 2–4 mm) so that the
-# flow can move medial and boundary points apart, as the constraints need.
+/// The fit settings of a case's configs.
+pub struct FitPlan {
+    /// Kernel width σ, mm.
+    pub sigma: f64,
+    /// Time steps N.
+    pub time_steps: usize,
+    /// Weight of the kinetic energy.
+    pub kinetic_weight: f64,
+    /// Prism layers between boundary and medial sheet in the Dice estimate.
+    pub layers: usize,
+    /// L-BFGS iterations per AL iteration of the SSD stages.
+    pub ssd_iterations: usize,
+    /// L-BFGS iterations per AL iteration of the Dice stage.
+    pub dice_iterations: usize,
+}
 
-[model]
-template = "template.vtk"
+/// AL iterations of the constrained SSD fit to the warped boundary (μ = 1, 10, 100).
+const BOUNDARY_AL_ITERATIONS: usize = 3;
 
-[flow]
-sigma = {sigma:?}          # kernel width, mm
-time_steps = {steps}
-kinetic_weight = {kinetic:?}
-
-[output]
-every_time_point = false
-
+impl FitPlan {
+    /// The paper's schedule (`fit.toml`): SSD towards the affine part `affine.txt` (μ = 1, one
+    /// AL iteration), then Dice against `target.nii.gz` with μ = 0.001, 0.01, 0.1, 1, 10.
+    /// `header` (TOML comment lines) explains the case.
+    pub fn paper_schedule(&self, header: &str) -> String {
+        format!(
+            r#"{preamble}
 [[stage]]
 name = "affine"
 attachment = "ssd"
@@ -162,22 +191,74 @@ max_iterations = {ssd}
 name = "dice"
 attachment = "dice"
 image = "target.nii.gz"
-layers = {layers}
+layers = {layers}          # prism layers across the wall (default 5: finer for thin walls)
 mu = 0.001
 mu_factor = 10.0
 al_iterations = 5
 max_iterations = {dice}
 "#,
-        name = shape.name(),
-        sigma = plan.sigma,
-        steps = plan.time_steps,
-        kinetic = plan.kinetic_weight,
-        layers = plan.layers,
-        ssd = plan.ssd_iterations,
-        dice = plan.dice_iterations,
-    )
+            preamble = self.preamble(
+                header,
+                "As in the paper: one SSD AL iteration (mu = 1) towards the affine initialisation, \
+                 then the\n# Dice attachment with mu rising from 0.001 to 10 over five AL \
+                 iterations."
+            ),
+            ssd = self.ssd_iterations,
+            layers = self.layers,
+            dice = self.dice_iterations,
+        )
+    }
+
+    /// The constrained SSD fit to the warped boundary points (`fit_boundary.toml`): target
+    /// `target_boundary.vtk` (known correspondence), μ = 1, 10, 100 over
+    /// [`BOUNDARY_AL_ITERATIONS`] AL iterations. `header` explains the case.
+    pub fn boundary_ssd(&self, header: &str) -> String {
+        format!(
+            r#"{preamble}
+[[stage]]
+name = "boundary"
+attachment = "ssd"
+target = "target_boundary.vtk"
+constraints = true
+mu = 1.0
+mu_factor = 10.0
+al_iterations = {al}
+max_iterations = {ssd}
+"#,
+            preamble = self.preamble(
+                header,
+                "SSD fit of the template's boundary points to the warped ones (known \
+                 correspondence), with\n# the medial constraints on, mu = 1, 10, 100."
+            ),
+            al = BOUNDARY_AL_ITERATIONS,
+            ssd = self.ssd_iterations,
+        )
+    }
+
+    /// The comment lines `header` and `schedule`, then `[model]`, `[flow]` and `[output]`.
+    fn preamble(&self, header: &str, schedule: &str) -> String {
+        format!(
+            r#"{header}# {schedule}
+
+[model]
+template = "template.vtk"
+
+[flow]
+sigma = {sigma:?}          # kernel width, mm
+time_steps = {steps}
+kinetic_weight = {kinetic:?}
+
+[output]
+every_time_point = false
+"#,
+            sigma = (self.sigma * 100.0).round() / 100.0,
+            steps = self.time_steps,
+            kinetic = self.kinetic_weight,
+        )
+    }
 }
 
+/// Writes `text` to `path` atomically.
 fn write_text(path: &Path, text: &str) -> Result<(), CliError> {
     Ok(medial_io::atomic::write_atomic(path, |w| {
         w.write_all(text.as_bytes())

@@ -1,7 +1,7 @@
 //! End-to-end tests of the template commands through the built binary: `medial inflate` and
 //! `medial project` on the real placenta sheet (against cmrep's own 818-point inflation),
 //! `medial synth` for both cases (checked by `medial eval` on the written fit.toml),
-//! `medial rasterize`, and how bad input is refused.
+//! `medial warp` on cmrep's t001 template, `medial rasterize`, and how bad input is refused.
 
 use medial_core::metrics::SpokeMetrics;
 use medial_core::template::MedialTemplate;
@@ -200,6 +200,234 @@ fn synthetic_cases_are_complete_and_their_configs_load() {
             t["boundary_points"].as_u64().unwrap()
         );
     }
+}
+
+/// A 4×4 matrix written as `medial warp` and SSD stages read it (row by row).
+fn write_matrix(path: &Path, m: [[f64; 4]; 4]) {
+    let text: String = m
+        .iter()
+        .map(|row| format!("{} {} {} {}\n", row[0], row[1], row[2], row[3]))
+        .collect();
+    std::fs::write(path, text).unwrap();
+}
+
+/// The 16 numbers of an affine text file as a matrix.
+fn read_matrix(path: &Path) -> nalgebra::Matrix4<f64> {
+    let numbers: Vec<f64> = std::fs::read_to_string(path)
+        .unwrap()
+        .split_whitespace()
+        .map(|w| w.parse().unwrap())
+        .collect();
+    nalgebra::Matrix4::from_row_slice(&numbers)
+}
+
+#[test]
+fn warp_turns_the_t001_template_into_a_case() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("t001");
+    let template_path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../../shared/data/cmrep/t001_template_bcmrep.vtk"
+    );
+    let summary = run_json(&["warp", template_path, "--out", s(&out)]);
+    println!("medial warp t001: {summary:#}");
+    for file in [
+        "template.vtk",
+        "target_boundary.vtk",
+        "target.nii.gz",
+        "affine.txt",
+        "fit_boundary.toml",
+        "fit.toml",
+    ] {
+        assert!(out.join(file).is_file(), "no {file}");
+    }
+    // The template is written back unchanged; the target boundary has its points, moved.
+    let original = medial_io::cmrep::read_template(Path::new(template_path)).unwrap();
+    let written = medial_io::cmrep::read_template(&out.join("template.vtk")).unwrap();
+    let gap = original
+        .landmarks()
+        .iter()
+        .zip(written.landmarks())
+        .map(|(p, q)| (p - q).norm())
+        .fold(0.0, f64::max);
+    assert!(gap < 1e-9, "{gap}");
+    let target = medial_io::vtk::read_trimesh(&out.join("target_boundary.vtk")).unwrap();
+    assert_eq!(target.points().len(), original.boundary_count());
+    assert_eq!(target.triangles(), original.boundary_triangles());
+    let moves: Vec<f64> = original
+        .boundary_points()
+        .iter()
+        .zip(target.points())
+        .map(|(p, q)| (q - p).norm())
+        .collect();
+    let max_move = moves.iter().copied().fold(0.0, f64::max);
+    assert!((max_move - f(&summary["displacement_max_mm"])).abs() < 1e-6);
+    assert!(max_move > 2.0 && max_move < 10.0, "{max_move}");
+    // Volume: twist and bend keep volume up to the factor 1 − κx̄ (κ|x̄| < κ·extent_x/2 ≈ 0.03
+    // on t001, measured 0.2 %), the affine part multiplies it by det A; rasterization at 0.5 mm
+    // adds about 1 %. Tolerance 2 %.
+    let det = read_matrix(&out.join("affine.txt"))
+        .fixed_view::<3, 3>(0, 0)
+        .determinant();
+    assert!(
+        (det - 1.03f64.powi(3)).abs() < 1e-9,
+        "default affine: scale 1.03"
+    );
+    let expected = det * volume(original.boundary_points(), original.boundary_triangles());
+    let image = medial_io::nifti_volume::read_nifti(&out.join("target.nii.gz")).unwrap();
+    let raster = image.integral();
+    println!(
+        "t001 warped: image volume {raster:.1} mm³, det A × template volume {expected:.1} mm³"
+    );
+    assert!(
+        (raster / expected - 1.0).abs() < 0.02,
+        "{raster} vs {expected}"
+    );
+    // Both configs load with everything they name: at zero controls the boundary stage
+    // measures the warp's displacement and the Dice stage a partial overlap.
+    let k = original.landmark_count();
+    let zeros = dir.path().join("zeros.npy");
+    zero_momenta(&zeros, 20, k);
+    let ssd = run_json(&[
+        "eval",
+        s(&out.join("fit_boundary.toml")),
+        "--momenta",
+        s(&zeros),
+    ]);
+    assert!((f(&ssd["mean_distance"]) - f(&summary["displacement_mean_mm"])).abs() < 1e-6);
+    let dice = run_json(&[
+        "eval",
+        s(&out.join("fit.toml")),
+        "--momenta",
+        s(&zeros),
+        "--stage",
+        "dice",
+    ]);
+    let d = f(&dice["dice"]);
+    assert!(d > 0.2 && d < 0.8, "t001 against its warp: Dice {d}");
+}
+
+#[test]
+fn warp_takes_an_affine_file_and_refuses_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = |n: &str| dir.path().join(n);
+    let template = data("cmrep/t001_template_bcmrep.vtk");
+    // No bend, no twist, a shift: every boundary point moves by the shift.
+    write_matrix(
+        &path("shift.txt"),
+        [
+            [1.0, 0.0, 0.0, 1.0],
+            [0.0, 1.0, 0.0, -2.0],
+            [0.0, 0.0, 1.0, 3.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ],
+    );
+    let (shifted, shift_file) = (path("shifted"), path("shift.txt"));
+    let args = [
+        "warp",
+        s(&template),
+        "--out",
+        s(&shifted),
+        "--bend",
+        "0",
+        "--twist",
+        "0",
+        "--affine",
+        s(&shift_file),
+        "--spacing",
+        "1",
+    ];
+    run_json(&args);
+    let original = medial_io::vtk::read_polydata(&template).unwrap().points;
+    let moved = medial_io::vtk::read_polydata(&path("shifted/target_boundary.vtk"))
+        .unwrap()
+        .points;
+    let shift = Vec3::new(1.0, -2.0, 3.0);
+    for (p, q) in original.iter().zip(&moved) {
+        assert!((q - p - shift).norm() < 1e-9);
+    }
+    // Failures exit with code 1, name the culprit and write nothing.
+    let fails = |args: &[&str], needles: &[&str]| {
+        let o = medial(args);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {}", text(&o.stderr));
+        let err = text(&o.stderr);
+        for n in needles {
+            assert!(err.contains(n), "{args:?}: message {err:?} lacks {n:?}");
+        }
+    };
+    let bad = path("bad");
+    let out = s(&bad);
+    fails(
+        &["warp", "/nonexistent/t.vtk", "--out", out],
+        &["/nonexistent/t.vtk"],
+    );
+    fails(
+        &[
+            "warp",
+            s(&data("cmrep/placenta_template_anterioralign3.vtk")),
+            "--out",
+            out,
+        ],
+        &["placenta_template_anterioralign3.vtk", "MedialIndex"],
+    );
+    fails(
+        &["warp", s(&template), "--out", out, "--bend", "NaN"],
+        &["--bend NaN", "finite"],
+    );
+    fails(
+        &["warp", s(&template), "--out", out, "--bend", "400"],
+        &["--bend 400", "360"],
+    );
+    fails(
+        &["warp", s(&template), "--out", out, "--spacing", "0"],
+        &["spacing"],
+    );
+    write_matrix(
+        &path("mirror.txt"),
+        [
+            [-1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ],
+    );
+    fails(
+        &[
+            "warp",
+            s(&template),
+            "--out",
+            out,
+            "--affine",
+            s(&path("mirror.txt")),
+        ],
+        &["mirror.txt", "determinant"],
+    );
+    std::fs::write(path("nan.txt"), "1 0 0 0 0 1 0 0 0 0 NaN 0 0 0 0 1").unwrap();
+    fails(
+        &[
+            "warp",
+            s(&template),
+            "--out",
+            out,
+            "--affine",
+            s(&path("nan.txt")),
+        ],
+        &["nan.txt", "finite"],
+    );
+    // A bend that folds a thick shape (κx ≥ 1 inside the bend): the synthetic cup, 45 mm across.
+    run_json(&["synth", "cup", "--out", s(&path("cup")), "--spacing", "1"]);
+    fails(
+        &[
+            "warp",
+            s(&path("cup/template.vtk")),
+            "--out",
+            out,
+            "--bend",
+            "200",
+        ],
+        &["cup/template.vtk", "not invertible", "κx"],
+    );
+    assert!(!bad.exists(), "failures write nothing");
 }
 
 #[test]

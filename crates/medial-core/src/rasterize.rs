@@ -39,6 +39,25 @@ pub fn rasterize(mesh: &TriMesh, dims: [usize; 3], voxel_to_world: Matrix4<f64>)
     Volume::new(dims, data, voxel_to_world)
 }
 
+/// The Dice coefficient `2 |M ∩ A| / (|M| + |A|)` between the voxels whose centres lie inside
+/// the closed mesh `mesh` (`M`, see [`rasterize`]) and the voxels of `mask` above ½ (`A`), on
+/// the grid of `mask`: the overlap a segmentation tool would report. 0 when both are empty.
+/// Errors: those of [`rasterize`].
+pub fn voxel_dice(mesh: &TriMesh, mask: &Volume) -> Result<f64> {
+    let model = rasterize(mesh, mask.dims(), *mask.voxel_to_world())?;
+    let (mut both, mut count) = (0usize, 0usize);
+    for (&m, &a) in model.data().iter().zip(mask.data()) {
+        let (m, a) = (m > 0.5, a > 0.5);
+        both += usize::from(m && a);
+        count += usize::from(m) + usize::from(a);
+    }
+    Ok(if count == 0 {
+        0.0
+    } else {
+        2.0 * both as f64 / count as f64
+    })
+}
+
 /// An axis-aligned grid of isotropic spacing `spacing_mm` covering the bounding box of `mesh`
 /// plus `margin_mm` on every side, centred on the box: `n_a = ⌈(extent_a + 2·margin)/h⌉ + 1`
 /// voxels along axis `a`. Returns `(dims, voxel_to_world)`. Refuses a non-positive or

@@ -18,6 +18,10 @@
 //! ([`crate::project::project`]). The target is the template boundary, midpoint subdivided
 //! [`TARGET_SUBDIVISIONS`] times (so that the smooth warp bends its triangles), carried by the
 //! case's [`Warp`]: a twist and a bend about the shape's long axis (z) followed by an affine map.
+//!
+//! Any other template becomes a case the same way: [`PrincipalAxes::of`] its points gives the
+//! frame of the twist and bend (long axis z, thickness direction x), [`Warp::bending`] the warp,
+//! and [`target_boundary`], [`target_surface`] and [`target_image`] the targets.
 
 use crate::inflate::{inflate, MedialSheet};
 use crate::project::{project, ProjectOptions, Projection};
@@ -105,7 +109,7 @@ impl Shape {
     }
 
     /// The known diffeomorphism that makes the target, about the centre `centre` of the
-    /// template (mm).
+    /// template (mm), in the world frame (`F = I`: the shapes are built along the z axis).
     pub fn warp(self, centre: Vec3) -> Warp {
         let (axis, angle_deg, scale, translation, twist_deg, bend_radius): (
             Vec3,
@@ -140,6 +144,7 @@ impl Shape {
             Rotation3::from_axis_angle(&Unit::new_normalize(axis), angle_deg.to_radians());
         Warp {
             centre,
+            frame: Rotation3::identity(),
             twist: twist_deg.to_radians() / length,
             bend: 1.0 / bend_radius,
             linear: rotation.matrix() * Matrix3::from_diagonal(&Vec3::from(scale)),
@@ -156,27 +161,34 @@ impl Shape {
 /// The known smooth diffeomorphism of a synthetic case,
 ///
 /// ```text
-/// φ(p) = c + t + A · B_κ(T_τ(p − c)),
+/// φ(p) = c + t + A · F · B_κ(T_τ(Fᵀ (p − c))),
 /// ```
 ///
-/// with `c` the centre, the twist `T_τ(x, y, z) = (R(τz)(x, y), z)` (`R(α)` the rotation of the
-/// plane by `α`), the bend `B_κ` that rolls the z axis onto a circle of radius `ρ = 1/κ` in the
-/// x–z plane,
+/// with `c` the centre (mm), `F` an orthonormal right-handed frame (its columns are the axes
+/// `x`, `y`, `z` of the bend in world coordinates: `z` the long axis that is twisted and bent,
+/// `x` the direction towards which it bends), the twist `T_τ(x, y, z) = (R(τz)(x, y), z)`
+/// (`R(α)` the rotation of the plane by `α`, `τ` in rad/mm), the bend `B_κ` that rolls the z
+/// axis onto a circle of radius `ρ = 1/κ` in the x–z plane,
 ///
 /// ```text
 /// B_κ(x, y, z) = (x cos θ + ρ (1 − cos θ), y, (ρ − x) sin θ),   θ = κ z,
 /// ```
 ///
 /// (arc length along the axis kept; Jacobian determinant `1 − κx`) and the affine map
-/// `p ↦ A p + t`. `φ` is a diffeomorphism of the slab `κx < 1, |κz| < π` onto its image, with
-/// the closed-form inverse [`Warp::inverse`].
+/// `p ↦ A (p − c) + c + t`. The built-in shapes use `F = I`. In frame coordinates `φ` is a
+/// diffeomorphism of the region `κx < 1, |κz| < π` (x, z after the twist) onto its image, with
+/// the closed-form inverse [`Warp::inverse`]; [`Warp::check_invertible_on`] checks that points
+/// lie in it. `det Dφ(p) = det A · (1 − κ x)` ([`Warp::jacobian_determinant`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Warp {
     /// Centre `c` of the twist and bend, mm.
     pub centre: Vec3,
-    /// Twist rate `τ` about the z axis, radians per mm.
+    /// Frame `F` of the twist and bend: rotation whose columns are its x (bend direction),
+    /// y and z (long axis) axes in world coordinates.
+    pub frame: Rotation3<f64>,
+    /// Twist rate `τ` about the frame's z axis, radians per mm.
     pub twist: f64,
-    /// Curvature `κ` of the bent z axis, 1/mm (0: no bend).
+    /// Curvature `κ` of the bent z axis, 1/mm (0: no bend; positive: towards +x).
     pub bend: f64,
     /// Linear part `A` of the affine map (invertible).
     pub linear: Matrix3<f64>,
@@ -185,18 +197,109 @@ pub struct Warp {
 }
 
 impl Warp {
+    /// A twist and bend along the principal axes of a shape followed by the affine map
+    /// `affine` (a 4×4 world matrix, last row `0 0 0 1`): centre `c` and frame `F` from
+    /// `axes`, `κ = bend_deg·π/180 / L` and `τ = twist_deg·π/180 / L` with `L` the extent of
+    /// the shape along its long axis (mm), so that the long axis turns by `bend_deg` degrees
+    /// from end to end and its ends rotate by `twist_deg` degrees against each other. With
+    /// `c` at the middle of that extent, the bend angle is `θ = κz ∈ [−bend/2, bend/2]`.
+    ///
+    /// Errors: `InvalidParameter` for non-finite angles, `|bend_deg| ≥ 360` (the bent axis
+    /// would overlap itself), an extent `L` that is not positive, and as
+    /// [`Warp::with_affine`].
+    pub fn bending(
+        axes: &PrincipalAxes,
+        bend_deg: f64,
+        twist_deg: f64,
+        affine: &Matrix4<f64>,
+    ) -> Result<Self> {
+        if !(bend_deg.is_finite() && twist_deg.is_finite()) {
+            return Err(Error::InvalidParameter(format!(
+                "bend and twist angles must be finite numbers of degrees, got {bend_deg} and \
+                 {twist_deg}"
+            )));
+        }
+        if bend_deg.abs() >= 360.0 {
+            return Err(Error::InvalidParameter(format!(
+                "a bend of {bend_deg}° would make the bent long axis overlap itself; it must be \
+                 less than 360° in magnitude"
+            )));
+        }
+        let length = axes.extent.z;
+        if !(length.is_finite() && length > 0.0) {
+            return Err(Error::InvalidParameter(format!(
+                "the extent of the shape along its long axis must be a positive number of mm, \
+                 got {length}"
+            )));
+        }
+        let warp = Self {
+            centre: axes.centre,
+            frame: axes.frame,
+            twist: twist_deg.to_radians() / length,
+            bend: bend_deg.to_radians() / length,
+            linear: Matrix3::identity(),
+            translation: Vec3::zeros(),
+        };
+        warp.with_affine(affine)
+    }
+
+    /// The same twist and bend followed by the affine map `affine` instead of the current one:
+    /// with `affine = [M b; 0 1]`, `A = M` and `t = M c + b − c`, so that
+    /// [`Warp::affine`] returns `affine`.
+    ///
+    /// Errors: `InvalidParameter` when `affine` has a non-finite entry, a last row other than
+    /// `0 0 0 1`, or `det M ≤ 0` (singular, or a reflection, which no flow of space can
+    /// reproduce).
+    pub fn with_affine(self, affine: &Matrix4<f64>) -> Result<Self> {
+        if affine.iter().any(|v| !v.is_finite()) {
+            return Err(Error::InvalidParameter(format!(
+                "the affine matrix has a non-finite entry: {affine}"
+            )));
+        }
+        if affine.row(3) != nalgebra::RowVector4::new(0.0, 0.0, 0.0, 1.0) {
+            return Err(Error::InvalidParameter(
+                "the last row of an affine matrix must be 0 0 0 1".into(),
+            ));
+        }
+        let linear: Matrix3<f64> = affine.fixed_view::<3, 3>(0, 0).into_owned();
+        let det = linear.determinant();
+        if det.is_nan() || det <= 0.0 {
+            return Err(Error::InvalidParameter(format!(
+                "the linear part of the affine matrix has determinant {det}; it must be \
+                 positive (no reflection, not singular)"
+            )));
+        }
+        let offset: Vec3 = affine.fixed_view::<3, 1>(0, 3).into_owned();
+        Ok(Self {
+            linear,
+            translation: linear * self.centre + offset - self.centre,
+            ..self
+        })
+    }
+
+    /// `T_τ(Fᵀ (p − c))`: the point in the frame of the bend after the twist, mm (the
+    /// argument of `B_κ`).
+    pub fn local(&self, p: &Vec3) -> Vec3 {
+        twist(
+            &self.frame.inverse_transform_vector(&(p - self.centre)),
+            self.twist,
+        )
+    }
+
     /// `φ(p)`, mm.
     pub fn apply(&self, p: &Vec3) -> Vec3 {
-        let bent = bend(&twist(&(p - self.centre), self.twist), self.bend);
-        self.centre + self.translation + self.linear * bent
+        let bent = bend(&self.local(p), self.bend);
+        self.centre + self.translation + self.linear * (self.frame * bent)
     }
 
     /// `φ⁻¹(p)`, or `None` when `A` is singular or `p` is the image of no point (the axis of
     /// the bend).
     pub fn inverse(&self, p: &Vec3) -> Option<Vec3> {
-        let bent = self.linear.try_inverse()? * (p - self.centre - self.translation);
+        let bent = self.frame.inverse_transform_vector(
+            &(self.linear.try_inverse()? * (p - self.centre - self.translation)),
+        );
         let twisted = unbend(&bent, self.bend)?;
-        Some(self.centre + twist(&twisted, -self.twist))
+        Some(self.centre + self.frame * twist(&twisted, -self.twist))
     }
 
     /// The affine part `p ↦ A (p − c) + c + t` as a 4×4 matrix (last row `0 0 0 1`): the warp
@@ -206,6 +309,115 @@ impl Warp {
         let offset = self.centre + self.translation - self.linear * self.centre;
         m.fixed_view_mut::<3, 1>(0, 3).copy_from(&offset);
         m
+    }
+
+    /// `det Dφ(p) = det A · (1 − κ x)` with `x` the first coordinate of [`Warp::local`]`(p)`
+    /// (rotations and the twist keep volume): the local volume ratio of the warp at `p`.
+    pub fn jacobian_determinant(&self, p: &Vec3) -> f64 {
+        self.linear.determinant() * (1.0 - self.bend * self.local(p).x)
+    }
+
+    /// Checks that every point lies where the bend is a diffeomorphism: `κ x < 1` and
+    /// `|κ z| < π` for `(x, y, z)` = [`Warp::local`]`(p)`.
+    ///
+    /// Errors: `InvalidParameter` naming the first point that does not, with `κx` or `κz`.
+    pub fn check_invertible_on(&self, points: &[Vec3]) -> Result<()> {
+        for (i, p) in points.iter().enumerate() {
+            let local = self.local(p);
+            let (across, along) = (self.bend * local.x, self.bend * local.z);
+            if across >= 1.0 || along.abs() >= PI {
+                return Err(Error::InvalidParameter(format!(
+                    "the bend (curvature {:.4} 1/mm, radius {:.2} mm) is not invertible on the \
+                     shape: at point {i} {:?}, κx = {across:.3} and κz = {along:.3} rad, but \
+                     κx must be < 1 (else the inside of the bend folds) and |κz| < π; use a \
+                     smaller bend angle",
+                    self.bend,
+                    1.0 / self.bend,
+                    p.as_slice()
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The principal axes of a point set, as [`Warp::bending`] uses them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrincipalAxes {
+    /// Centre of the bounding box of the points in the frame, `mean + F·(lo + hi)/2`, mm.
+    pub centre: Vec3,
+    /// Right-handed orthonormal frame whose columns are the eigenvectors of the points'
+    /// covariance: z of the largest variance (the long axis), x of the smallest (the thickness
+    /// direction of a sheet), `y = z × x`. Each of x and z has its largest-magnitude
+    /// component positive (a deterministic choice of sign).
+    pub frame: Rotation3<f64>,
+    /// Extent `hi − lo` of the points along x, y, z of the frame, mm.
+    pub extent: Vec3,
+    /// Standard deviations of the points along x, y, z of the frame (square roots of the
+    /// covariance eigenvalues), mm.
+    pub std_dev: Vec3,
+}
+
+impl PrincipalAxes {
+    /// The principal axes of `points`: covariance `Σ (p − p̄)(p − p̄)ᵀ / n` about the mean `p̄`,
+    /// its eigenvectors as the frame, the bounding box in that frame.
+    ///
+    /// Errors: `NonFinite` for a non-finite coordinate; `InvalidParameter` for no points or
+    /// points without extent along their long axis (all equal).
+    pub fn of(points: &[Vec3]) -> Result<Self> {
+        if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+            return Err(Error::NonFinite(format!(
+                "point {i} is {:?}",
+                points[i].as_slice()
+            )));
+        }
+        if points.is_empty() {
+            return Err(Error::InvalidParameter(
+                "principal axes need at least one point".into(),
+            ));
+        }
+        let n = points.len() as f64;
+        let mean = points.iter().sum::<Vec3>() / n;
+        let covariance = points
+            .iter()
+            .map(|p| (p - mean) * (p - mean).transpose())
+            .sum::<Matrix3<f64>>()
+            / n;
+        let eigen = covariance.symmetric_eigen();
+        let mut order = [0, 1, 2];
+        order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
+        let axis = |k: usize| positive_sign(eigen.eigenvectors.column(order[k]).into_owned());
+        let (x, z) = (axis(0), axis(2));
+        let y = z.cross(&x).normalize();
+        let frame = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[y.cross(&z), y, z]));
+        let local: Vec<Vec3> = points
+            .iter()
+            .map(|p| frame.inverse_transform_vector(&(p - mean)))
+            .collect();
+        let (lo, hi) = bounds(&local).unwrap_or_default();
+        let extent = hi - lo;
+        if extent.z <= 0.0 {
+            return Err(Error::InvalidParameter(format!(
+                "the {} points have no extent along their long axis (all equal)",
+                points.len()
+            )));
+        }
+        let variance = Vec3::from_fn(|k, _| eigen.eigenvalues[order[k]].max(0.0));
+        Ok(Self {
+            centre: mean + frame * ((lo + hi) / 2.0),
+            frame,
+            extent,
+            std_dev: variance.map(f64::sqrt),
+        })
+    }
+}
+
+/// `v` or `−v`, whichever has its largest-magnitude component positive.
+fn positive_sign(v: Vec3) -> Vec3 {
+    if v[v.iamax()] < 0.0 {
+        -v
+    } else {
+        v
     }
 }
 
@@ -243,6 +455,46 @@ fn unbend(p: &Vec3, curvature: f64) -> Option<Vec3> {
     Some(Vec3::new(rho - sign * distance, p.y, theta / curvature))
 }
 
+/// The SSD target with known correspondence: `boundary` with every point carried by `warp`
+/// (same triangles, same order), mm.
+///
+/// Errors: as [`Warp::check_invertible_on`] when the warp folds the boundary.
+pub fn target_boundary(boundary: &TriMesh, warp: &Warp) -> Result<TriMesh> {
+    warp.check_invertible_on(boundary.points())?;
+    TriMesh::new(
+        boundary.points().iter().map(|p| warp.apply(p)).collect(),
+        boundary.triangles().to_vec(),
+    )
+}
+
+/// The target surface: `boundary` midpoint subdivided [`TARGET_SUBDIVISIONS`] times (so that
+/// the smooth warp bends its triangles), then carried by `warp` point by point, mm.
+///
+/// Errors: as [`target_boundary`].
+pub fn target_surface(boundary: &TriMesh, warp: &Warp) -> Result<TriMesh> {
+    let mut mesh = boundary.clone();
+    for _ in 0..TARGET_SUBDIVISIONS {
+        mesh = midpoint_subdivide(&mesh)?;
+    }
+    target_boundary(&mesh, warp)
+}
+
+/// The target segmentation: [`target_surface`] rasterized (1 inside, 0 outside) on an
+/// axis-aligned grid of spacing `spacing_mm` around it with `margin_mm` on every side (see
+/// [`grid_around`]).
+///
+/// Errors: as [`target_surface`], [`grid_around`] and [`rasterize`] (an open boundary).
+pub fn target_image(
+    boundary: &TriMesh,
+    warp: &Warp,
+    spacing_mm: f64,
+    margin_mm: f64,
+) -> Result<Volume> {
+    let surface = target_surface(boundary, warp)?;
+    let (dims, voxel_to_world) = grid_around(&surface, spacing_mm, margin_mm)?;
+    rasterize(&surface, dims, voxel_to_world)
+}
+
 /// A synthetic case: its template (with the figures of its projection) and its warp.
 #[derive(Clone, Debug)]
 pub struct SyntheticCase {
@@ -275,11 +527,11 @@ impl SyntheticCase {
             inflated.medial_points,
         )?;
         let projection = project(&template, &ProjectOptions::default())?;
-        let centre = bounding_centre(projection.template.landmarks());
+        let (lo, hi) = bounds(projection.template.landmarks()).unwrap_or_default();
         Ok(Self {
             shape,
             sheet,
-            warp: shape.warp(centre),
+            warp: shape.warp((lo + hi) / 2.0),
             projection,
         })
     }
@@ -291,45 +543,32 @@ impl SyntheticCase {
 
     /// The template's boundary mesh.
     pub fn boundary(&self) -> Result<TriMesh> {
-        let t = self.template();
-        TriMesh::new(
-            t.boundary_points().to_vec(),
-            t.boundary_triangles().to_vec(),
-        )
+        boundary_mesh(self.template())
     }
 
-    /// The warped template boundary, point for point (same triangles): an SSD target with
-    /// known correspondence.
+    /// [`target_boundary`] of the template: the warped boundary, point for point.
     pub fn target_boundary(&self) -> Result<TriMesh> {
-        let (points, triangles) = self.boundary()?.into_parts();
-        TriMesh::new(
-            points.iter().map(|p| self.warp.apply(p)).collect(),
-            triangles,
-        )
+        target_boundary(&self.boundary()?, &self.warp)
     }
 
-    /// The target surface: the template boundary midpoint subdivided [`TARGET_SUBDIVISIONS`]
-    /// times, then warped.
+    /// [`target_surface`] of the template: its boundary subdivided, then warped.
     pub fn target_surface(&self) -> Result<TriMesh> {
-        let mut mesh = self.boundary()?;
-        for _ in 0..TARGET_SUBDIVISIONS {
-            mesh = midpoint_subdivide(&mesh)?;
-        }
-        let (points, triangles) = mesh.into_parts();
-        TriMesh::new(
-            points.iter().map(|p| self.warp.apply(p)).collect(),
-            triangles,
-        )
+        target_surface(&self.boundary()?, &self.warp)
     }
 
-    /// The target segmentation: [`Self::target_surface`] rasterized (1 inside, 0 outside) on
-    /// an axis-aligned grid of spacing `spacing_mm` around it with `margin_mm` on every side
-    /// (see [`grid_around`]).
+    /// [`target_image`] of the template: the target surface rasterized with voxels of
+    /// `spacing_mm` and `margin_mm` around it.
     pub fn target_image(&self, spacing_mm: f64, margin_mm: f64) -> Result<Volume> {
-        let surface = self.target_surface()?;
-        let (dims, voxel_to_world) = grid_around(&surface, spacing_mm, margin_mm)?;
-        rasterize(&surface, dims, voxel_to_world)
+        target_image(&self.boundary()?, &self.warp, spacing_mm, margin_mm)
     }
+}
+
+/// The boundary mesh of `template` (its boundary points and triangles).
+pub fn boundary_mesh(template: &MedialTemplate) -> Result<TriMesh> {
+    TriMesh::new(
+        template.boundary_points().to_vec(),
+        template.boundary_triangles().to_vec(),
+    )
 }
 
 /// Splits every triangle `(a, b, c)` into `(a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca)`
@@ -354,15 +593,14 @@ pub fn midpoint_subdivide(mesh: &TriMesh) -> Result<TriMesh> {
     TriMesh::new(points, triangles)
 }
 
-/// Centre of the axis-aligned bounding box of `points` (the origin for none).
-fn bounding_centre(points: &[Vec3]) -> Vec3 {
-    let Some(first) = points.first() else {
-        return Vec3::zeros();
-    };
-    let (lo, hi) = points
-        .iter()
-        .fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
-    (lo + hi) / 2.0
+/// The corners `(lo, hi)` of the axis-aligned bounding box of `points` (`None` for none).
+fn bounds(points: &[Vec3]) -> Option<(Vec3, Vec3)> {
+    let first = points.first()?;
+    Some(
+        points
+            .iter()
+            .fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p))),
+    )
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use medial_core::attachment::dice::{DiceAttachment, DiceParams, DiceValue};
-use medial_core::rasterize::{grid_around, rasterize};
+use medial_core::rasterize::{self, grid_around, rasterize};
 use medial_core::volume::Volume;
 use medial_core::{TriMesh, Vec3};
 use proptest::prelude::*;
@@ -641,6 +641,29 @@ fn rasterized_sphere_has_the_enclosed_volume() {
         );
         assert!((volume / enclosed - 1.0).abs() < 0.02);
     }
+}
+
+/// The voxel Dice of a mesh against its own rasterization is 1; against a shifted copy it is
+/// `2|A ∩ B| / (|A| + |B|)` counted voxel by voxel on the mask's grid.
+#[test]
+fn voxel_dice_counts_overlapping_voxels() {
+    let disc = thick_disc(5, 10.0, 4.0);
+    let mesh = disc.boundary(&disc.q);
+    let (dims, grid) = grid_around(&mesh, 0.5, 3.0).unwrap();
+    let mask = rasterize(&mesh, dims, grid).unwrap();
+    assert_eq!(rasterize::voxel_dice(&mesh, &mask).unwrap(), 1.0);
+    let shifted = disc.boundary(&disc.translated(Vec3::new(1.1, -0.3, 0.7)));
+    let moved = mask_on(&shifted, &mask);
+    let both: f64 = mask
+        .data()
+        .iter()
+        .zip(moved.data())
+        .map(|(a, b)| a * b)
+        .sum();
+    let count: f64 = mask.data().iter().chain(moved.data()).sum();
+    let d = rasterize::voxel_dice(&shifted, &mask).unwrap();
+    assert_eq!(d, 2.0 * both / count);
+    assert!(d > 0.6 && d < 0.95, "{d}");
 }
 
 /// The attachment built from `medial_io::cmrep::read_template` (the path the CLI takes) sees
