@@ -1,27 +1,12 @@
 //! End-to-end tests of `medial fit` and `medial eval` through the built binary, on cmrep's own
 //! t001 medial template (k = 503), and of how bad input is refused.
 
+mod common;
+
+use common::{data, f, medial, run_fails, run_json, s, text};
 use medial_io::npy::read_npy;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data")
-        .join(name)
-}
-
-fn medial(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_medial"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// A config fitting t001 to its own boundary moved by a rotation of 4° and a shift, so the
 /// exact answer is known (an affine map keeps a medial model medial).
@@ -52,14 +37,14 @@ transform = "move.txt"
 fn fit(config: &Path, out: &Path, threads: &str) -> Value {
     let o = medial(&[
         "fit",
-        config.to_str().unwrap(),
+        s(config),
         "--out",
-        out.to_str().unwrap(),
+        s(out),
         "--threads",
         threads,
         "-q",
     ]);
-    assert!(o.status.success(), "fit failed: {}", stderr(&o));
+    assert!(o.status.success(), "fit failed: {}", text(&o.stderr));
     serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
 }
 
@@ -142,16 +127,14 @@ fn one_or_two_threads_give_the_same_bits_and_eval_reproduces_the_fit() {
     assert_eq!(s1["final"], s2["final"]);
 
     let gradient = dir.path().join("g.npy");
-    let o = medial(&[
+    let figures = run_json(&[
         "eval",
-        config.to_str().unwrap(),
+        s(&config),
         "--momenta",
-        one.join("momenta.npy").to_str().unwrap(),
+        s(&one.join("momenta.npy")),
         "--gradient",
-        gradient.to_str().unwrap(),
+        s(&gradient),
     ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let figures: Value = serde_json::from_slice(&o.stdout).unwrap();
     // With λ = 0 and the stage's initial μ, eval gives the penalty function at the fitted
     // controls: same kinetic energy and data term as the fit's final figures.
     for key in [
@@ -160,10 +143,7 @@ fn one_or_two_threads_give_the_same_bits_and_eval_reproduces_the_fit() {
         "max_abs_constraint",
         "max_spoke_normal_deg",
     ] {
-        let (a, b) = (
-            figures[key].as_f64().unwrap(),
-            s1["final"][key].as_f64().unwrap(),
-        );
+        let (a, b) = (f(&figures[key]), f(&s1["final"][key]));
         assert!(
             (a - b).abs() <= 1e-9 * b.abs().max(1.0),
             "{key}: eval {a} vs fit {b}"
@@ -172,14 +152,9 @@ fn one_or_two_threads_give_the_same_bits_and_eval_reproduces_the_fit() {
     assert_eq!(read_npy(&gradient).unwrap().shape, vec![10, 503, 3]);
 }
 
+/// Runs the binary, asserts failure with a message mentioning `expected` and no panic.
 fn assert_refused(args: &[&str], expected: &str) {
-    let o = medial(args);
-    let err = stderr(&o);
-    assert!(!o.status.success(), "{args:?} should fail");
-    assert!(
-        err.contains(expected),
-        "{args:?}: message {err:?} should mention {expected:?}"
-    );
+    let err = text(&run_fails(args, &[expected]).stderr);
     assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
 }
 
@@ -187,16 +162,13 @@ fn assert_refused(args: &[&str], expected: &str) {
 fn bad_input_is_refused_with_a_clear_message() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    assert_refused(
-        &["fit", d.join("missing.toml").to_str().unwrap()],
-        "missing.toml",
-    );
+    assert_refused(&["fit", s(&d.join("missing.toml"))], "missing.toml");
 
     let config = write_case(d, "max_iterations = 5");
     let text = std::fs::read_to_string(&config).unwrap();
     let typo = d.join("typo.toml");
     std::fs::write(&typo, text.replace("sigma =", "sigam =")).unwrap();
-    assert_refused(&["fit", typo.to_str().unwrap()], "sigam");
+    assert_refused(&["fit", s(&typo)], "sigam");
 
     let no_template = d.join("no_template.toml");
     std::fs::write(
@@ -204,7 +176,7 @@ fn bad_input_is_refused_with_a_clear_message() {
         text.replace("t001_template_bcmrep.vtk", "nothing_here.vtk"),
     )
     .unwrap();
-    assert_refused(&["fit", no_template.to_str().unwrap()], "nothing_here.vtk");
+    assert_refused(&["fit", s(&no_template)], "nothing_here.vtk");
 
     let wrong_target = d.join("wrong_target.toml");
     let hippo = data("keops/hippos_reduc_target.vtk");
@@ -216,7 +188,7 @@ fn bad_input_is_refused_with_a_clear_message() {
         ),
     )
     .unwrap();
-    assert_refused(&["fit", wrong_target.to_str().unwrap()], "662 points");
+    assert_refused(&["fit", s(&wrong_target)], "662 points");
 
     let nan_mesh = d.join("nan.vtk");
     std::fs::write(&nan_mesh, "# vtk DataFile Version 3.0\nx\nASCII\nDATASET POLYDATA\nPOINTS 3 float\n0 0 0 1 nan 0 0 1 0\nPOLYGONS 1 4\n3 0 1 2\n").unwrap();
@@ -225,11 +197,11 @@ fn bad_input_is_refused_with_a_clear_message() {
         &nan_config,
         text.replace(
             &data("cmrep/t001_template_bcmrep.vtk").display().to_string(),
-            nan_mesh.to_str().unwrap(),
+            s(&nan_mesh),
         ),
     )
     .unwrap();
-    assert_refused(&["fit", nan_config.to_str().unwrap()], "nan.vtk");
+    assert_refused(&["fit", s(&nan_config)], "nan.vtk");
 
     let quad = d.join("quad.vtk");
     std::fs::write(&quad, "# vtk DataFile Version 3.0\nx\nASCII\nDATASET POLYDATA\nPOINTS 4 float\n0 0 0 1 0 0 1 1 0 0 1 0\nPOLYGONS 1 5\n4 0 1 2 3\n").unwrap();
@@ -238,29 +210,21 @@ fn bad_input_is_refused_with_a_clear_message() {
         &quad_config,
         text.replace(
             &data("cmrep/t001_template_bcmrep.vtk").display().to_string(),
-            quad.to_str().unwrap(),
+            s(&quad),
         ),
     )
     .unwrap();
-    assert_refused(&["fit", quad_config.to_str().unwrap()], "quad.vtk");
+    assert_refused(&["fit", s(&quad_config)], "quad.vtk");
 
     let bad_momenta = d.join("bad.npy");
     medial_io::npy::write_npy(&bad_momenta, &[2, 3], &[0.0; 6]).unwrap();
+    assert_refused(&["eval", s(&config), "--momenta", s(&bad_momenta)], "shape");
     assert_refused(
         &[
             "eval",
-            config.to_str().unwrap(),
+            s(&config),
             "--momenta",
-            bad_momenta.to_str().unwrap(),
-        ],
-        "shape",
-    );
-    assert_refused(
-        &[
-            "eval",
-            config.to_str().unwrap(),
-            "--momenta",
-            bad_momenta.to_str().unwrap(),
+            s(&bad_momenta),
             "--stage",
             "nope",
         ],

@@ -3,60 +3,20 @@
 //! `medial synth` for both cases (checked by `medial eval` on the written fit.toml),
 //! `medial warp` on cmrep's t001 template, `medial rasterize`, and how bad input is refused.
 
+mod common;
+
+use common::{data, f, run_fails, run_json, s, text};
 use medial_core::metrics::SpokeMetrics;
 use medial_core::template::MedialTemplate;
 use medial_core::Vec3;
 use serde_json::Value;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data")
-        .join(name)
-}
-
-fn medial(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_medial"))
-        .args(args)
-        .output()
-        .expect("the binary runs")
-}
-
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
-/// Runs the binary, asserts success, parses its JSON output.
-fn run_json(args: &[&str]) -> Value {
-    let o = medial(args);
-    assert!(o.status.success(), "{args:?} failed: {}", text(&o.stderr));
-    serde_json::from_slice(&o.stdout).expect("JSON on stdout")
-}
-
-/// Runs the binary, asserts failure with a one-line message containing every `needles`.
-fn run_fails(args: &[&str], needles: &[&str]) {
-    let o = medial(args);
-    let err = text(&o.stderr);
-    assert!(!o.status.success(), "{args:?} should fail");
-    for n in needles {
-        assert!(err.contains(n), "{args:?}: message {err:?} lacks {n:?}");
-    }
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("UTF-8 temp path")
-}
+use std::path::Path;
 
 fn volume(points: &[Vec3], triangles: &[[usize; 3]]) -> f64 {
     triangles
         .iter()
         .map(|t| points[t[0]].dot(&points[t[1]].cross(&points[t[2]])) / 6.0)
         .sum()
-}
-
-fn f(v: &Value) -> f64 {
-    v.as_f64().unwrap_or_else(|| panic!("{v} is not a number"))
 }
 
 #[test]
@@ -137,6 +97,16 @@ fn zero_momenta(path: &Path, steps: usize, landmarks: usize) {
     .unwrap();
 }
 
+/// The figures of `medial eval` of `config` at the controls in `momenta`, for the stage named
+/// `stage` (the first stage if `None`).
+fn eval(config: &Path, momenta: &Path, stage: Option<&str>) -> Value {
+    let mut args = vec!["eval", s(config), "--momenta", s(momenta)];
+    if let Some(name) = stage {
+        args.extend(["--stage", name]);
+    }
+    run_json(&args)
+}
+
 #[test]
 fn synthetic_cases_are_complete_and_their_configs_load() {
     for (name, histogram_has_seam) in [("toy", true), ("cup", false)] {
@@ -170,25 +140,11 @@ fn synthetic_cases_are_complete_and_their_configs_load() {
             .expect("fit.toml has time_steps");
         let zeros = dir.path().join("zeros.npy");
         zero_momenta(&zeros, steps, k);
-        let dice = run_json(&[
-            "eval",
-            s(&out.join("fit.toml")),
-            "--momenta",
-            s(&zeros),
-            "--stage",
-            "dice",
-        ]);
+        let dice = eval(&out.join("fit.toml"), &zeros, Some("dice"));
         let d = f(&dice["dice"]);
         println!("{name}: k = {k}, Dice of the template against its target {d:.3}");
         assert!(d > 0.4 && d < 0.95, "{name}: {d}");
-        let ssd = run_json(&[
-            "eval",
-            s(&out.join("fit.toml")),
-            "--momenta",
-            s(&zeros),
-            "--stage",
-            "affine",
-        ]);
+        let ssd = eval(&out.join("fit.toml"), &zeros, Some("affine"));
         assert!(
             f(&ssd["mean_distance"]) > 0.5,
             "the affine part moves the template"
@@ -288,21 +244,9 @@ fn warp_turns_the_t001_template_into_a_case() {
     let k = original.landmark_count();
     let zeros = dir.path().join("zeros.npy");
     zero_momenta(&zeros, 20, k);
-    let ssd = run_json(&[
-        "eval",
-        s(&out.join("fit_boundary.toml")),
-        "--momenta",
-        s(&zeros),
-    ]);
+    let ssd = eval(&out.join("fit_boundary.toml"), &zeros, None);
     assert!((f(&ssd["mean_distance"]) - f(&summary["displacement_mean_mm"])).abs() < 1e-6);
-    let dice = run_json(&[
-        "eval",
-        s(&out.join("fit.toml")),
-        "--momenta",
-        s(&zeros),
-        "--stage",
-        "dice",
-    ]);
+    let dice = eval(&out.join("fit.toml"), &zeros, Some("dice"));
     let d = f(&dice["dice"]);
     assert!(d > 0.2 && d < 0.8, "t001 against its warp: Dice {d}");
 }
@@ -348,15 +292,17 @@ fn warp_takes_an_affine_file_and_refuses_bad_input() {
     }
     // Failures exit with code 1, name the culprit and write nothing.
     let fails = |args: &[&str], needles: &[&str]| {
-        let o = medial(args);
+        let o = run_fails(args, needles);
         assert_eq!(o.status.code(), Some(1), "{args:?}: {}", text(&o.stderr));
-        let err = text(&o.stderr);
-        for n in needles {
-            assert!(err.contains(n), "{args:?}: message {err:?} lacks {n:?}");
-        }
     };
     let bad = path("bad");
     let out = s(&bad);
+    // `medial warp` of t001 with further `options`.
+    let t001_fails = |options: &[&str], needles: &[&str]| {
+        let mut args = vec!["warp", s(&template), "--out", out];
+        args.extend(options);
+        fails(&args, needles);
+    };
     fails(
         &["warp", "/nonexistent/t.vtk", "--out", out],
         &["/nonexistent/t.vtk"],
@@ -370,18 +316,9 @@ fn warp_takes_an_affine_file_and_refuses_bad_input() {
         ],
         &["placenta_template_anterioralign3.vtk", "MedialIndex"],
     );
-    fails(
-        &["warp", s(&template), "--out", out, "--bend", "NaN"],
-        &["--bend NaN", "finite"],
-    );
-    fails(
-        &["warp", s(&template), "--out", out, "--bend", "400"],
-        &["--bend 400", "360"],
-    );
-    fails(
-        &["warp", s(&template), "--out", out, "--spacing", "0"],
-        &["spacing"],
-    );
+    t001_fails(&["--bend", "NaN"], &["--bend NaN", "finite"]);
+    t001_fails(&["--bend", "400"], &["--bend 400", "360"]);
+    t001_fails(&["--spacing", "0"], &["spacing"]);
     write_matrix(
         &path("mirror.txt"),
         [
@@ -391,29 +328,12 @@ fn warp_takes_an_affine_file_and_refuses_bad_input() {
             [0.0, 0.0, 0.0, 1.0],
         ],
     );
-    fails(
-        &[
-            "warp",
-            s(&template),
-            "--out",
-            out,
-            "--affine",
-            s(&path("mirror.txt")),
-        ],
+    t001_fails(
+        &["--affine", s(&path("mirror.txt"))],
         &["mirror.txt", "determinant"],
     );
     std::fs::write(path("nan.txt"), "1 0 0 0 0 1 0 0 0 0 NaN 0 0 0 0 1").unwrap();
-    fails(
-        &[
-            "warp",
-            s(&template),
-            "--out",
-            out,
-            "--affine",
-            s(&path("nan.txt")),
-        ],
-        &["nan.txt", "finite"],
-    );
+    t001_fails(&["--affine", s(&path("nan.txt"))], &["nan.txt", "finite"]);
     // A bend that folds a thick shape (κx ≥ 1 inside the bend): the synthetic cup, 45 mm across.
     run_json(&["synth", "cup", "--out", s(&path("cup")), "--spacing", "1"]);
     fails(
@@ -583,8 +503,8 @@ fn bad_inputs_fail_with_clear_messages() {
     );
 }
 
-/// The shipped demo (examples/toy) reaches the paper's figures in under two minutes (about
-/// 20–40 s on 2 cores); ignored by default for its length: run with
+/// The shipped demo (examples/toy) reaches the paper's figures (it prints its running time, about
+/// 20–40 s on 2 cores; never asserted); ignored by default for its length: run with
 /// `cargo test -p medial-cli --test cli_templates -- --ignored`.
 #[test]
 #[ignore]
@@ -598,5 +518,4 @@ fn toy_demo_reaches_the_papers_figures() {
     assert!(f(&figures["dice"]) >= 0.93);
     assert!(f(&figures["max_spoke_normal_deg"]) <= 1.1);
     assert!(f(&figures["max_spoke_mismatch_pct"]) <= 2.2);
-    assert!(seconds < 120.0, "{seconds} s");
 }

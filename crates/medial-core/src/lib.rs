@@ -27,6 +27,8 @@ pub mod project;
 pub mod rasterize;
 pub mod synth;
 pub mod template;
+#[cfg(test)]
+mod test_meshes;
 pub mod topology;
 pub mod volume;
 

@@ -168,30 +168,8 @@ fn sparse_rows(n: usize, offsets: &[usize], columns: &[usize], values: &[f64]) -
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_meshes::octahedron;
     use approx::assert_relative_eq;
-
-    /// Unit octahedron (outward): every vertex has valence 4.
-    fn octahedron() -> (Vec<Vec3>, Vec<[usize; 3]>) {
-        let p = vec![
-            Vec3::x(),
-            -Vec3::x(),
-            Vec3::y(),
-            -Vec3::y(),
-            Vec3::z(),
-            -Vec3::z(),
-        ];
-        let t = vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ];
-        (p, t)
-    }
 
     #[test]
     fn octahedron_normals_are_radial() {

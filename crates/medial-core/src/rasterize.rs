@@ -350,29 +350,13 @@ impl Expansion {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_meshes;
     use nalgebra::Vector4;
 
-    /// A closed octahedron of "radius" r centred at c.
+    /// The octahedron of [`test_meshes::octahedron`] scaled by r ("radius") and centred at c.
     fn octahedron(c: Vec3, r: f64) -> TriMesh {
-        let points = vec![
-            c + Vec3::new(r, 0.0, 0.0),
-            c - Vec3::new(r, 0.0, 0.0),
-            c + Vec3::new(0.0, r, 0.0),
-            c - Vec3::new(0.0, r, 0.0),
-            c + Vec3::new(0.0, 0.0, r),
-            c - Vec3::new(0.0, 0.0, r),
-        ];
-        let triangles = vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ];
-        TriMesh::new(points, triangles).unwrap()
+        let (points, triangles) = test_meshes::octahedron();
+        TriMesh::new(points.iter().map(|p| c + r * p).collect(), triangles).unwrap()
     }
 
     #[test]

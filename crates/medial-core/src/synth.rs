@@ -22,6 +22,7 @@
 //! Any other template becomes a case the same way: [`PrincipalAxes::of`] its points gives the
 //! frame of the twist and bend (long axis z, thickness direction x), [`Warp::bending`] the warp,
 //! and [`target_boundary`], [`target_surface`] and [`target_image`] the targets.
+//! [`parameter_grid`] triangulates the parameter rectangle of a new analytic sheet.
 
 use crate::inflate::{inflate, MedialSheet};
 use crate::project::{project, ProjectOptions, Projection};
@@ -670,10 +671,23 @@ fn cup_sheet() -> Result<MedialSheet> {
 // ---------------------------------------------------------------------------------------------
 // The toy
 
-/// A grid of `(nu+1) × (nv+1)` points `(i/nu, j/nv)` (point `j(nu+1) + i`), each cell split
-/// along the diagonal through its corner with even `i + j`, counter-clockwise in `(u, v)`.
-/// With `nu`, `nv` even no triangle has two edges on the border of the grid.
-fn grid(nu: usize, nv: usize) -> (Vec<[f64; 2]>, Vec<[usize; 3]>) {
+/// The parameter points `(u, v)` and the triangles (indices into them) of a [`parameter_grid`].
+pub type ParameterGrid = (Vec<[f64; 2]>, Vec<[usize; 3]>);
+
+/// The triangulated parameter rectangle of a medial sheet: `(nu+1) × (nv+1)` parameter points
+/// `(u, v) = (i/nu, j/nv)` in `[0, 1]²` (point `j(nu+1) + i`) and `2 nu nv` triangles, each
+/// cell split along the diagonal through its corner with even `i + j`, counter-clockwise in
+/// `(u, v)`. With `nu`, `nv` even no triangle has two edges on the border of the grid, as
+/// [`inflate`] requires. Mapping the parameters to points and radii gives a [`MedialSheet`]
+/// (the toy's sheets are three such grids sharing the column `u = 0`).
+///
+/// Errors: `InvalidParameter` if `nu` or `nv` is 0.
+pub fn parameter_grid(nu: usize, nv: usize) -> Result<ParameterGrid> {
+    if nu == 0 || nv == 0 {
+        return Err(Error::InvalidParameter(format!(
+            "a parameter grid needs at least one cell each way, got {nu} × {nv}"
+        )));
+    }
     let id = |i: usize, j: usize| j * (nu + 1) + i;
     let params = (0..=nv)
         .flat_map(|j| (0..=nu).map(move |i| [i as f64 / nu as f64, j as f64 / nv as f64]))
@@ -689,7 +703,7 @@ fn grid(nu: usize, nv: usize) -> (Vec<[f64; 2]>, Vec<[usize; 3]>) {
             }
         }
     }
-    (params, triangles)
+    Ok((params, triangles))
 }
 
 /// Half thickness of the toy at distance fraction `u` from the seam and height fraction `v`.
@@ -700,7 +714,7 @@ fn toy_radius(u: f64, v: f64) -> f64 {
 
 fn toy_sheet() -> Result<MedialSheet> {
     let [nw, nz] = TOY_CELLS;
-    let (params, cells) = grid(nw, nz);
+    let (params, cells) = parameter_grid(nw, nz)?;
     // The seam: grid column u = 0, shared by the three sheets (points 0 ..= nz).
     let mut points: Vec<Vec3> = (0..=nz)
         .map(|j| Vec3::new(0.0, 0.0, TOY_LENGTH * (j as f64 / nz as f64 - 0.5)))
@@ -761,6 +775,25 @@ mod tests {
             let (e1, e2) = (xy(t[1]) - xy(t[0]), xy(t[2]) - xy(t[0]));
             assert!(e1.perp(&e2) > 1e-3, "{t:?}");
         }
+    }
+
+    #[test]
+    fn parameter_grid_tiles_the_unit_square_counter_clockwise() {
+        let (params, triangles) = parameter_grid(4, 2).unwrap();
+        assert_eq!((params.len(), triangles.len()), (5 * 3, 2 * 4 * 2));
+        assert_eq!((params[6], params[14]), ([0.25, 0.5], [1.0, 1.0]));
+        let area = |t: &[usize; 3]| {
+            let [a, b, c] = t.map(|k| nalgebra::Vector2::from(params[k]));
+            (b - a).perp(&(c - a)) / 2.0
+        };
+        assert!(triangles.iter().all(|t| area(t) > 0.0));
+        assert_relative_eq!(
+            triangles.iter().map(area).sum::<f64>(),
+            1.0,
+            epsilon = 1e-12
+        );
+        let m = parameter_grid(3, 0).unwrap_err().to_string();
+        assert!(m.contains("3 × 0"), "{m}");
     }
 
     #[test]

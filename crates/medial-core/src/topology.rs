@@ -211,27 +211,11 @@ fn edge_problem(uses: &[EdgeUse]) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_meshes;
 
-    /// Regular octahedron, outward oriented.
+    /// The regular octahedron of [`test_meshes::octahedron`], outward oriented.
     fn octahedron() -> TriMesh {
-        let points = vec![
-            Vec3::new(1.0, 0.0, 0.0),
-            Vec3::new(-1.0, 0.0, 0.0),
-            Vec3::new(0.0, 1.0, 0.0),
-            Vec3::new(0.0, -1.0, 0.0),
-            Vec3::new(0.0, 0.0, 1.0),
-            Vec3::new(0.0, 0.0, -1.0),
-        ];
-        let triangles = vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ];
+        let (points, triangles) = test_meshes::octahedron();
         TriMesh::new(points, triangles).expect("valid octahedron")
     }
 

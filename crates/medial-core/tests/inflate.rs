@@ -6,44 +6,27 @@ use std::f64::consts::PI;
 use std::path::Path;
 
 use medial_core::inflate::{inflate, Inflated, MedialSheet};
+use medial_core::synth::parameter_grid;
 use medial_core::{Error, Vec3};
 use proptest::prelude::*;
+
+#[path = "../src/test_meshes.rs"]
+mod test_meshes;
+use test_meshes::octahedron;
 
 const CMREP: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/cmrep/");
 
 // ---------------------------------------------------------------------------------------------
 // Builders
 
-/// A grid of `(nu+1) × (nv+1)` parameter points `(i/nu, j/nv)`, point `j(nu+1) + i`, each cell
-/// split along the diagonal through the corner with even `i + j` (so that with `nu`, `nv` even
-/// no triangle has two free edges), counter-clockwise in `(u, v)`.
-fn grid(nu: usize, nv: usize) -> (Vec<[f64; 2]>, Vec<[usize; 3]>) {
-    let id = |i: usize, j: usize| j * (nu + 1) + i;
-    let params = (0..=nv)
-        .flat_map(|j| (0..=nu).map(move |i| [i as f64 / nu as f64, j as f64 / nv as f64]))
-        .collect();
-    let mut triangles = Vec::new();
-    for j in 0..nv {
-        for i in 0..nu {
-            let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
-            if (i + j) % 2 == 0 {
-                triangles.extend([[a, b, c], [a, c, d]]);
-            } else {
-                triangles.extend([[a, b, d], [b, c, d]]);
-            }
-        }
-    }
-    (params, triangles)
-}
-
-/// A sheet over a grid: points `f(u, v)`, radii `r(point)`.
+/// A sheet over `parameter_grid(nu, nv)`: points `f(u, v)`, radii `r(point)`.
 fn grid_sheet(
     nu: usize,
     nv: usize,
     f: impl Fn(f64, f64) -> Vec3,
     r: impl Fn(&Vec3) -> f64,
 ) -> MedialSheet {
-    let (params, triangles) = grid(nu, nv);
+    let (params, triangles) = parameter_grid(nu, nv).expect("at least one cell each way");
     let points: Vec<Vec3> = params.iter().map(|p| f(p[0], p[1])).collect();
     let radius = points.iter().map(&r).collect();
     MedialSheet::new(points, triangles, radius).expect("valid grid sheet")
@@ -65,7 +48,7 @@ const Y_ANGLES: [f64; 3] = [
 /// along the seam `x = y = 0, 0 ≤ z ≤ length` at 120°; sheet 1 is oriented the other way.
 /// The seam points are points `0 ..= nz`.
 fn y_sheet(nw: usize, nz: usize, width: f64, length: f64, radius: f64) -> MedialSheet {
-    let (params, cells) = grid(nw, nz);
+    let (params, cells) = parameter_grid(nw, nz).expect("at least one cell each way");
     let mut points: Vec<Vec3> = (0..=nz)
         .map(|j| Vec3::new(0.0, 0.0, length * j as f64 / nz as f64))
         .collect();
@@ -699,24 +682,7 @@ fn steep_radius_and_ears_are_refused() {
 #[test]
 fn a_closed_sheet_is_refused() {
     // The inner side of a closed sheet is a second shell facing inward.
-    let points = vec![
-        Vec3::x(),
-        -Vec3::x(),
-        Vec3::y(),
-        -Vec3::y(),
-        Vec3::z(),
-        -Vec3::z(),
-    ];
-    let triangles = vec![
-        [0, 2, 4],
-        [2, 1, 4],
-        [1, 3, 4],
-        [3, 0, 4],
-        [2, 0, 5],
-        [1, 2, 5],
-        [3, 1, 5],
-        [0, 3, 5],
-    ];
+    let (points, triangles) = octahedron();
     let sheet = MedialSheet::new(points, triangles, vec![0.1; 6]).unwrap();
     let m = message(inflate(&sheet).unwrap_err());
     assert!(

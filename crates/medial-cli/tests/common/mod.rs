@@ -1,0 +1,54 @@
+//! Helpers shared by the end-to-end tests of the `medial` binary (`mod common;` in each).
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The file `name` of the real data set (`/work/shared/data`, see its README.md).
+pub fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data")
+        .join(name)
+}
+
+/// Runs the built binary with `args`, whatever its exit status.
+pub fn medial(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_medial"))
+        .args(args)
+        .output()
+        .expect("the binary runs")
+}
+
+/// Output bytes as text (invalid UTF-8 replaced).
+pub fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// Runs the binary, asserts success, parses its JSON output.
+pub fn run_json(args: &[&str]) -> Value {
+    let o = medial(args);
+    assert!(o.status.success(), "{args:?} failed: {}", text(&o.stderr));
+    serde_json::from_slice(&o.stdout).expect("JSON on stdout")
+}
+
+/// Runs the binary, asserts failure with a message containing every `needles`; returns the
+/// output for further checks.
+pub fn run_fails(args: &[&str], needles: &[&str]) -> Output {
+    let o = medial(args);
+    let err = text(&o.stderr);
+    assert!(!o.status.success(), "{args:?} should fail");
+    for n in needles {
+        assert!(err.contains(n), "{args:?}: message {err:?} lacks {n:?}");
+    }
+    o
+}
+
+/// A path as a command-line argument.
+pub fn s(p: &Path) -> &str {
+    p.to_str().expect("UTF-8 temp path")
+}
+
+/// A JSON number.
+pub fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("{v} is not a number"))
+}
