@@ -166,16 +166,17 @@ impl Geometry {
             .min(self.long_extent_mm / 8.0)
     }
 
-    /// The fit settings: `σ` from the geometry, 20 time steps, kinetic weight 0.005, 10 Dice
-    /// layers, 500 L-BFGS iterations per SSD AL iteration, 150 per Dice AL iteration.
+    /// The fit settings: `σ` from the geometry, 20 time steps, kinetic weight 0.005; L-BFGS
+    /// iterations: 500 towards the affine part, 1000 per AL iteration of the boundary fit, 300
+    /// per AL iteration of the Dice stage.
     fn plan(&self) -> FitPlan {
         FitPlan {
             sigma: self.sigma_mm,
             time_steps: 20,
             kinetic_weight: 0.005,
-            layers: 10,
-            ssd_iterations: 500,
-            dice_iterations: 150,
+            affine_iterations: 500,
+            boundary_iterations: 1000,
+            dice_iterations: 300,
         }
     }
 }

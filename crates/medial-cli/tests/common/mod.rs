@@ -1,4 +1,6 @@
 //! Helpers shared by the end-to-end tests of the `medial` binary (`mod common;` in each).
+// Each test crate compiles this module and uses a subset of it.
+#![allow(dead_code)]
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};
