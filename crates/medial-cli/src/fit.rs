@@ -5,6 +5,7 @@ use crate::error::CliError;
 use crate::model::Model;
 use crate::report::{write_json, Figures, Log, LogRow, Progress, StageSummary, Summary};
 use crate::stage::{self, Prepared};
+use crate::time_points::{self, time_points};
 use medial_core::augmented_lagrangian::{run_stage, Stage};
 use medial_core::flow::{Flow, FlowParams, Trajectory};
 use medial_core::objective::ConstraintSet;
@@ -119,6 +120,10 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
     let seconds = start.elapsed().as_secs_f64();
     let trajectory = flow.shoot(model.landmarks(), &controls)?;
     write_results(config, options, &model, &flow, &controls, &trajectory)?;
+    let points = time_points(&model, &trajectory);
+    if !points.is_empty() {
+        time_points::write_csv(&options.out.join("time_points.csv"), &points)?;
+    }
     let summary = Summary {
         version: env!("CARGO_PKG_VERSION"),
         landmarks: model.landmarks().len(),
@@ -134,6 +139,7 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
             .last()
             .map(|s| s.figures.clone())
             .expect("a config has at least one stage"),
+        over_time: time_points::over_time(&points),
         stages: summaries,
     };
     write_json(&options.out.join("summary.json"), &summary)?;

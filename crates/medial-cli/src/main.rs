@@ -11,6 +11,7 @@ mod rasterize_cmd;
 mod report;
 mod stage;
 mod synth_cmd;
+mod time_points;
 mod warp_cmd;
 
 use clap::{Parser, Subcommand};

@@ -2,6 +2,7 @@
 //! progress on the terminal (a bar when stderr is a terminal, plain log lines otherwise).
 
 use crate::error::CliError;
+use crate::time_points::OverTime;
 use medial_core::metrics::SpokeMetrics;
 use medial_core::objective::Evaluation;
 use serde::Serialize;
@@ -111,6 +112,10 @@ pub struct Summary {
     /// Figures at the end.
     #[serde(rename = "final")]
     pub final_figures: Figures,
+    /// Medial templates: the worst spoke figures over time points 1 … N (`time_points.csv`
+    /// holds them per time point).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub over_time: Option<OverTime>,
     /// Each stage.
     pub stages: Vec<StageSummary>,
 }

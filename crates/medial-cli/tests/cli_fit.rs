@@ -99,6 +99,7 @@ fn fit_writes_every_output_and_matches_an_affine_target() {
             medial_io::vtk::read_polydata(&out.join(format!("flow/medial_t{n:03}.vtk"))).unwrap();
         assert!(medial.point_array("Thickness").is_some());
     }
+    check_time_points(&out, &summary);
     let fitted = medial_io::cmrep::read_template(&out.join("fitted_template.vtk")).unwrap();
     assert_eq!(fitted.landmark_count(), 503);
     let metrics = medial_core::metrics::SpokeMetrics::compute(&fitted, fitted.landmarks());
@@ -108,6 +109,35 @@ fn fit_writes_every_output_and_matches_an_affine_target() {
         "{} vs {reported}",
         metrics.max_spoke_normal_deg
     );
+}
+
+/// `time_points.csv` has one row per time point: the template's own figures at t = 0 (0.070°,
+/// 0.067 %), the final figures at t = 1, and `over_time` in summary.json is their worst over
+/// time points 1 … N.
+fn check_time_points(out: &Path, summary: &Value) {
+    let csv = std::fs::read_to_string(out.join("time_points.csv")).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "time_point,t,max_spoke_normal_deg,mean_spoke_normal_deg,max_spoke_mismatch_pct,\
+         max_abs_constraint,min_thickness_mm,max_thickness_mm"
+    );
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 11);
+    assert!((rows[0][2] - 0.070140).abs() < 1e-5, "{:?}", rows[0]);
+    assert!((rows[0][4] - 0.066982).abs() < 1e-5, "{:?}", rows[0]);
+    let last = &summary["final"];
+    assert_eq!(rows[10][1], 1.0);
+    assert!((rows[10][2] - f(&last["max_spoke_normal_deg"])).abs() < 1e-12);
+    assert!((rows[10][4] - f(&last["max_spoke_mismatch_pct"])).abs() < 1e-12);
+    let worst = |c: usize| rows[1..].iter().map(|r| r[c]).fold(f64::MIN, f64::max);
+    let over = &summary["over_time"];
+    assert_eq!(f(&over["max_spoke_normal_deg"]), worst(2));
+    assert_eq!(f(&over["max_spoke_mismatch_pct"]), worst(4));
+    assert_eq!(f(&over["max_abs_constraint"]), worst(5));
+    assert!(f(&over["max_spoke_normal_deg"]) >= f(&last["max_spoke_normal_deg"]));
 }
 
 #[test]

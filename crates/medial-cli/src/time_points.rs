@@ -1,0 +1,112 @@
+//! The medial figures of SPEC §6 at every time point of the fitted flow: `time_points.csv`
+//! (one row per time point, for a spreadsheet or `numpy.genfromtxt`) and their worst values
+//! over the flow for `summary.json`. Medial templates only: a plain mesh has no spokes.
+
+use crate::error::CliError;
+use crate::model::Model;
+use medial_core::flow::Trajectory;
+use serde::Serialize;
+use std::path::Path;
+
+/// The figures of one time point.
+#[derive(Clone, Copy, Debug)]
+pub struct TimePoint {
+    /// `n = 0 … N`.
+    pub index: usize,
+    /// `t = n / N`.
+    pub t: f64,
+    /// Largest spoke–normal angle, degrees.
+    pub max_spoke_normal_deg: f64,
+    /// Mean spoke–normal angle, degrees.
+    pub mean_spoke_normal_deg: f64,
+    /// Largest spoke-length mismatch, %.
+    pub max_spoke_mismatch_pct: f64,
+    /// `max_l |C_l(q^n)|` (mm²).
+    pub max_abs_constraint: f64,
+    /// Smallest and largest local thickness (2 × mean spoke length of an atom), mm.
+    pub thickness_range_mm: [f64; 2],
+}
+
+/// The worst figures over time points `1 … N` (time point 0, the template, is not optimised).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct OverTime {
+    /// Largest spoke–normal angle at any time point, degrees.
+    pub max_spoke_normal_deg: f64,
+    /// Largest spoke-length mismatch at any time point, %.
+    pub max_spoke_mismatch_pct: f64,
+    /// Largest `|C|` at any time point.
+    pub max_abs_constraint: f64,
+    /// Smallest local thickness at any time point, mm.
+    pub min_thickness_mm: f64,
+}
+
+/// The figures at every time point of `trajectory`; empty for a plain mesh.
+pub fn time_points(model: &Model, trajectory: &Trajectory) -> Vec<TimePoint> {
+    let Some(constraints) = model.constraints() else {
+        return Vec::new();
+    };
+    let last = trajectory.time_points() - 1;
+    let mut values = vec![0.0; constraints.len()];
+    (0..=last)
+        .map(|n| {
+            let q = trajectory.positions(n);
+            let m = model
+                .metrics(&q)
+                .expect("a medial template has spoke metrics");
+            constraints.evaluate(&q, &mut values);
+            TimePoint {
+                index: n,
+                t: n as f64 / last.max(1) as f64,
+                max_spoke_normal_deg: m.max_spoke_normal_deg,
+                mean_spoke_normal_deg: m.mean_spoke_normal_deg,
+                max_spoke_mismatch_pct: 100.0 * m.max_spoke_mismatch,
+                max_abs_constraint: values.iter().fold(0.0, |a: f64, c| a.max(c.abs())),
+                thickness_range_mm: m
+                    .thickness
+                    .iter()
+                    .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], &x| {
+                        [lo.min(x), hi.max(x)]
+                    }),
+            }
+        })
+        .collect()
+}
+
+/// The worst figures over time points `1 … N`; `None` without time points after the first.
+pub fn over_time(points: &[TimePoint]) -> Option<OverTime> {
+    let flow = points.get(1..).filter(|p| !p.is_empty())?;
+    let max = |f: fn(&TimePoint) -> f64| flow.iter().map(f).fold(f64::NEG_INFINITY, f64::max);
+    Some(OverTime {
+        max_spoke_normal_deg: max(|p| p.max_spoke_normal_deg),
+        max_spoke_mismatch_pct: max(|p| p.max_spoke_mismatch_pct),
+        max_abs_constraint: max(|p| p.max_abs_constraint),
+        min_thickness_mm: -max(|p| -p.thickness_range_mm[0]),
+    })
+}
+
+/// Writes `time_points.csv` (header and one row per time point) atomically.
+pub fn write_csv(path: &Path, points: &[TimePoint]) -> Result<(), CliError> {
+    medial_io::atomic::write_atomic(path, |w| {
+        writeln!(
+            w,
+            "time_point,t,max_spoke_normal_deg,mean_spoke_normal_deg,max_spoke_mismatch_pct,\
+             max_abs_constraint,min_thickness_mm,max_thickness_mm"
+        )?;
+        for p in points {
+            writeln!(
+                w,
+                "{},{},{:e},{:e},{:e},{:e},{:e},{:e}",
+                p.index,
+                p.t,
+                p.max_spoke_normal_deg,
+                p.mean_spoke_normal_deg,
+                p.max_spoke_mismatch_pct,
+                p.max_abs_constraint,
+                p.thickness_range_mm[0],
+                p.thickness_range_mm[1]
+            )?;
+        }
+        Ok(())
+    })?;
+    Ok(())
+}
