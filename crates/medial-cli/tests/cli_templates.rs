@@ -249,6 +249,17 @@ fn warp_turns_the_t001_template_into_a_case() {
     let dice = eval(&out.join("fit.toml"), &zeros, Some("dice"));
     let d = f(&dice["dice"]);
     assert!(d > 0.2 && d < 0.8, "t001 against its warp: Dice {d}");
+    // The voxel overlap of the rasterized template with the target's foreground: also partial,
+    // and above the estimate (which pays for the blur of the image edge).
+    let v = f(&dice["voxel_dice"]);
+    assert!(
+        v > d && v < 0.9,
+        "t001 against its warp: voxel Dice {v}, estimate {d}"
+    );
+    assert!(
+        ssd.get("voxel_dice").is_none(),
+        "SSD stages have no voxel Dice"
+    );
 }
 
 #[test]
