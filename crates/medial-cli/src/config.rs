@@ -92,6 +92,17 @@ pub enum MuUpdateConfig {
     IfNotHalved,
 }
 
+/// The unit of the medial constraints (see `medial_core::constraints::ConstraintUnits`).
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum ConstraintUnitsConfig {
+    /// mm², as SPEC §3 and the reference implementation (the paper's μ values carry over).
+    #[default]
+    Absolute,
+    /// Divided by the template's spoke and tangent lengths: dimensionless.
+    Relative,
+}
+
 /// `[[stage]]`.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -134,6 +145,9 @@ pub struct StageConfig {
     /// When μ grows.
     #[serde(default)]
     pub mu_update: MuUpdateConfig,
+    /// Unit of the medial constraints in the penalty.
+    #[serde(default)]
+    pub constraint_units: ConstraintUnitsConfig,
     /// Augmented-Lagrangian iterations.
     #[serde(default = "defaults::al_iterations")]
     pub al_iterations: usize,

@@ -38,15 +38,15 @@ pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> 
     let prepared = stage::prepare(stage_cfg, &model)?;
     let steps = flow.time_steps();
     let controls = read_array(&options.momenta, &[steps, k, 3], "momenta")?;
-    let constraints = model.constraints().filter(|_| prepared.constrained);
-    let lambda = match (&options.lambda, &constraints) {
+    let constraints = prepared.constraints.as_ref();
+    let lambda = match (&options.lambda, constraints) {
         (Some(path), Some(c)) => read_array(path, &[steps, c.len()], "lambda")?,
         (Some(_), None) => {
             return Err(CliError::Input(
                 "--lambda given but the stage has no constraints".into(),
             ))
         }
-        (None, c) => vec![0.0; steps * c.as_ref().map_or(0, |c| c.len())],
+        (None, c) => vec![0.0; steps * c.map_or(0, |c| c.len())],
     };
     let mut objective = Objective::new(
         &flow,
@@ -54,7 +54,7 @@ pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> 
         prepared.attachment.as_ref(),
         stage_cfg.data_weight(),
     );
-    if let Some(c) = &constraints {
+    if let Some(c) = constraints {
         let mu = options.mu.unwrap_or(stage_cfg.mu);
         objective = objective.with_penalty(Penalty {
             constraints: c as &dyn ConstraintSet,

@@ -43,7 +43,6 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         .iter()
         .map(|s| stage::prepare(s, &model))
         .collect::<Result<Vec<_>, _>>()?;
-    let constraints = model.constraints();
     create_dir(&options.out.join("flow"))?;
     let mut log = Log::create(&options.out.join("log.csv"))?;
     let mut progress = Progress::new(options.quiet);
@@ -57,9 +56,9 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
             template: model.landmarks(),
             attachment: prepared.attachment.as_ref(),
             data_weight: cfg.data_weight(),
-            constraints: constraints
+            constraints: prepared
+                .constraints
                 .as_ref()
-                .filter(|_| prepared.constrained)
                 .map(|c| c as &dyn ConstraintSet),
         };
         let mut log_error = None;
@@ -129,7 +128,7 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         landmarks: model.landmarks().len(),
         boundary_points: model.boundary_count(),
         medial_atoms: model.medial_count(),
-        constraints_per_time_point: constraints.as_ref().map_or(0, |c| c.len()),
+        constraints_per_time_point: model.constraints().map_or(0, |c| c.len()),
         time_steps: flow.time_steps(),
         sigma: flow.kernel().sigma(),
         threads: options.threads,

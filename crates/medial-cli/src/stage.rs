@@ -1,13 +1,14 @@
 //! Turns a `[[stage]]` of the config into what the engine runs: the attachment, whether the
 //! medial constraints apply, the μ schedule and the L-BFGS options.
 
-use crate::config::{AttachmentKind, MuUpdateConfig, StageConfig};
+use crate::config::{AttachmentKind, ConstraintUnitsConfig, MuUpdateConfig, StageConfig};
 use crate::error::CliError;
 use crate::model::Model;
 use medial_core::attachment::dice::{DiceAttachment, DiceParams};
 use medial_core::attachment::ssd::Ssd;
 use medial_core::attachment::Attachment;
 use medial_core::augmented_lagrangian::{AlSchedule, MuUpdate};
+use medial_core::constraints::{ConstraintUnits, MedialConstraints};
 use medial_core::optimize::LbfgsOptions;
 use medial_core::rasterize::voxel_dice;
 use medial_core::volume::Volume;
@@ -23,8 +24,8 @@ pub struct Prepared {
     /// Dice stages: the binary foreground of the image (before smoothing), to report the voxel
     /// overlap of the rasterized model.
     pub mask: Option<Volume>,
-    /// Whether the medial constraints apply.
-    pub constrained: bool,
+    /// The medial constraints, when they apply.
+    pub constraints: Option<MedialConstraints>,
     /// The μ schedule.
     pub schedule: AlSchedule,
     /// L-BFGS options.
@@ -69,7 +70,7 @@ pub fn prepare(stage: &StageConfig, model: &Model) -> Result<Prepared, CliError>
         attachment,
         ssd,
         mask,
-        constrained,
+        constraints: constraints(stage, model, constrained)?,
         schedule: AlSchedule {
             mu: stage.mu,
             mu_factor: stage.mu_factor,
@@ -87,6 +88,24 @@ pub fn prepare(stage: &StageConfig, model: &Model) -> Result<Prepared, CliError>
             relative_decrease: stage.relative_decrease,
         },
     })
+}
+
+/// The medial constraints of a constrained stage, in the stage's units.
+fn constraints(
+    stage: &StageConfig,
+    model: &Model,
+    constrained: bool,
+) -> Result<Option<MedialConstraints>, CliError> {
+    let Some(template) = model.medial().filter(|_| constrained) else {
+        return Ok(None);
+    };
+    let units = match stage.constraint_units {
+        ConstraintUnitsConfig::Absolute => ConstraintUnits::Absolute,
+        ConstraintUnitsConfig::Relative => ConstraintUnits::Relative,
+    };
+    let constraints = MedialConstraints::with_units(template, units)
+        .map_err(|e| CliError::Input(format!("stage '{}': {e}", stage.name)))?;
+    Ok(Some(constraints))
 }
 
 /// The SSD targets: the points of `target` (same count and order as the template boundary),

@@ -21,8 +21,8 @@ pub struct TimePoint {
     pub mean_spoke_normal_deg: f64,
     /// Largest spoke-length mismatch, %.
     pub max_spoke_mismatch_pct: f64,
-    /// `max_l |C_l(q^n)|` (mm²).
-    pub max_abs_constraint: f64,
+    /// `max_l |C_l(q^n)|` in SPEC §3's units (mm²), whatever the stages' `constraint_units`.
+    pub max_abs_constraint_mm2: f64,
     /// Smallest and largest local thickness (2 × mean spoke length of an atom), mm.
     pub thickness_range_mm: [f64; 2],
 }
@@ -34,8 +34,8 @@ pub struct OverTime {
     pub max_spoke_normal_deg: f64,
     /// Largest spoke-length mismatch at any time point, %.
     pub max_spoke_mismatch_pct: f64,
-    /// Largest `|C|` at any time point.
-    pub max_abs_constraint: f64,
+    /// Largest `|C|` at any time point, mm² (SPEC §3's units).
+    pub max_abs_constraint_mm2: f64,
     /// Smallest local thickness at any time point, mm.
     pub min_thickness_mm: f64,
 }
@@ -60,7 +60,7 @@ pub fn time_points(model: &Model, trajectory: &Trajectory) -> Vec<TimePoint> {
                 max_spoke_normal_deg: m.max_spoke_normal_deg,
                 mean_spoke_normal_deg: m.mean_spoke_normal_deg,
                 max_spoke_mismatch_pct: 100.0 * m.max_spoke_mismatch,
-                max_abs_constraint: values.iter().fold(0.0, |a: f64, c| a.max(c.abs())),
+                max_abs_constraint_mm2: values.iter().fold(0.0, |a: f64, c| a.max(c.abs())),
                 thickness_range_mm: m
                     .thickness
                     .iter()
@@ -79,7 +79,7 @@ pub fn over_time(points: &[TimePoint]) -> Option<OverTime> {
     Some(OverTime {
         max_spoke_normal_deg: max(|p| p.max_spoke_normal_deg),
         max_spoke_mismatch_pct: max(|p| p.max_spoke_mismatch_pct),
-        max_abs_constraint: max(|p| p.max_abs_constraint),
+        max_abs_constraint_mm2: max(|p| p.max_abs_constraint_mm2),
         min_thickness_mm: -max(|p| -p.thickness_range_mm[0]),
     })
 }
@@ -90,7 +90,7 @@ pub fn write_csv(path: &Path, points: &[TimePoint]) -> Result<(), CliError> {
         writeln!(
             w,
             "time_point,t,max_spoke_normal_deg,mean_spoke_normal_deg,max_spoke_mismatch_pct,\
-             max_abs_constraint,min_thickness_mm,max_thickness_mm"
+             max_abs_constraint_mm2,min_thickness_mm,max_thickness_mm"
         )?;
         for p in points {
             writeln!(
@@ -101,7 +101,7 @@ pub fn write_csv(path: &Path, points: &[TimePoint]) -> Result<(), CliError> {
                 p.max_spoke_normal_deg,
                 p.mean_spoke_normal_deg,
                 p.max_spoke_mismatch_pct,
-                p.max_abs_constraint,
+                p.max_abs_constraint_mm2,
                 p.thickness_range_mm[0],
                 p.thickness_range_mm[1]
             )?;

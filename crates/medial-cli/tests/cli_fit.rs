@@ -120,7 +120,7 @@ fn check_time_points(out: &Path, summary: &Value) {
     assert_eq!(
         lines.next().unwrap(),
         "time_point,t,max_spoke_normal_deg,mean_spoke_normal_deg,max_spoke_mismatch_pct,\
-         max_abs_constraint,min_thickness_mm,max_thickness_mm"
+         max_abs_constraint_mm2,min_thickness_mm,max_thickness_mm"
     );
     let rows: Vec<Vec<f64>> = lines
         .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
@@ -136,7 +136,7 @@ fn check_time_points(out: &Path, summary: &Value) {
     let over = &summary["over_time"];
     assert_eq!(f(&over["max_spoke_normal_deg"]), worst(2));
     assert_eq!(f(&over["max_spoke_mismatch_pct"]), worst(4));
-    assert_eq!(f(&over["max_abs_constraint"]), worst(5));
+    assert_eq!(f(&over["max_abs_constraint_mm2"]), worst(5));
     assert!(f(&over["max_spoke_normal_deg"]) >= f(&last["max_spoke_normal_deg"]));
 }
 
@@ -180,6 +180,32 @@ fn one_or_two_threads_give_the_same_bits_and_eval_reproduces_the_fit() {
         );
     }
     assert_eq!(read_npy(&gradient).unwrap().shape, vec![10, 503, 3]);
+}
+
+/// `constraint_units` is a stage key: at the template (zero controls) the relative constraints
+/// are bounded by the template's own figures (sin 0.0702° for orthogonality, 0.067 % for equal
+/// spokes) while the absolute ones are in mm²; an unknown unit is refused by name.
+#[test]
+fn constraint_units_are_a_stage_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let zeros = dir.path().join("zeros.npy");
+    medial_io::npy::write_npy(&zeros, &[10, 503, 3], &vec![0.0; 10 * 503 * 3]).unwrap();
+    let eval_with = |units: &str| {
+        let case = dir.path().join(units);
+        std::fs::create_dir_all(&case).unwrap();
+        let config = write_case(&case, &format!("constraint_units = \"{units}\""));
+        run_json(&["eval", s(&config), "--momenta", s(&zeros)])
+    };
+    let relative = f(&eval_with("relative")["max_abs_constraint"]);
+    let absolute = f(&eval_with("absolute")["max_abs_constraint"]);
+    println!("max |C| at t001: relative {relative:e}, absolute {absolute:e} mm²");
+    assert!(
+        relative > 0.0 && relative <= 0.0702f64.to_radians().sin(),
+        "{relative}"
+    );
+    assert!(absolute > 2.0 * relative, "{absolute} vs {relative}");
+    let config = write_case(dir.path(), "constraint_units = \"relativ\"");
+    assert_refused(&["fit", s(&config)], "relativ");
 }
 
 /// Runs the binary, asserts failure with a message mentioning `expected` and no panic.

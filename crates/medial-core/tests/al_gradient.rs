@@ -2,7 +2,7 @@
 //! (cmrep's t001, k = 503, L = 753): its exact gradient against central finite differences.
 
 use medial_core::attachment::ssd::Ssd;
-use medial_core::constraints::MedialConstraints;
+use medial_core::constraints::{ConstraintUnits, MedialConstraints};
 use medial_core::flow::{Flow, FlowParams};
 use medial_core::objective::{Objective, Penalty};
 use medial_core::Vec3;
@@ -12,10 +12,19 @@ use std::path::Path;
 
 #[test]
 fn al_objective_gradient_matches_central_differences_on_t001() {
+    check(ConstraintUnits::Absolute);
+}
+
+#[test]
+fn al_objective_gradient_in_relative_units_matches_central_differences_on_t001() {
+    check(ConstraintUnits::Relative);
+}
+
+fn check(units: ConstraintUnits) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/data/cmrep/t001_template_bcmrep.vtk");
     let template = medial_io::cmrep::read_template(&path).unwrap();
-    let constraints = MedialConstraints::new(&template);
+    let constraints = MedialConstraints::with_units(&template, units).unwrap();
     assert_eq!(constraints.len(), 753);
     let q0 = template.landmarks();
     let steps = 4;
@@ -68,7 +77,7 @@ fn al_objective_gradient_matches_central_differences_on_t001() {
         let rel = (fd - exact).abs() / exact.abs();
         assert!(
             rel <= 1e-6,
-            "trial {trial}: exact {exact} vs finite difference {fd} (relative error {rel:e})"
+            "{units:?}, trial {trial}: exact {exact} vs finite difference {fd} (relative error {rel:e})"
         );
     }
 }

@@ -2,7 +2,7 @@
 //! constraint values against direct formulas, Jacobian and weighted gradient against central
 //! finite differences, and invariance under similarity transforms.
 
-use medial_core::constraints::MedialConstraints;
+use medial_core::constraints::{ConstraintUnits, MedialConstraints};
 use medial_core::metrics::SpokeMetrics;
 use medial_core::template::MedialTemplate;
 use medial_core::{TriMesh, Vec3};
@@ -189,8 +189,8 @@ fn finite_difference_jacobian(c: &MedialConstraints, q: &[Vec3], h: f64) -> Vec<
     columns
 }
 
-fn check_jacobian(t: &MedialTemplate, seed: u64) {
-    let c = MedialConstraints::new(t);
+fn check_jacobian(t: &MedialTemplate, seed: u64, units: ConstraintUnits) {
+    let c = MedialConstraints::with_units(t, units).unwrap();
     let q = perturbed(t, 0.5, seed);
     let jac = c.jacobian(&q);
     assert_eq!(jac.shape(), (c.len(), 3 * q.len()));
@@ -215,8 +215,8 @@ fn check_jacobian(t: &MedialTemplate, seed: u64) {
     );
 }
 
-fn check_gradient(t: &MedialTemplate, seed: u64) {
-    let c = MedialConstraints::new(t);
+fn check_gradient(t: &MedialTemplate, seed: u64, units: ConstraintUnits) {
+    let c = MedialConstraints::with_units(t, units).unwrap();
     let q = perturbed(t, 0.5, seed);
     let mut rng = ChaCha8Rng::seed_from_u64(seed + 100);
     let weights: Vec<f64> = (0..c.len()).map(|_| rng.gen_range(-2.0..2.0)).collect();
@@ -260,12 +260,67 @@ fn check_gradient(t: &MedialTemplate, seed: u64) {
 
 #[test]
 fn jacobian_matches_central_differences() {
-    check_jacobian(&t001(), 2);
+    check_jacobian(&t001(), 2, ConstraintUnits::Absolute);
+    check_jacobian(&t001(), 2, ConstraintUnits::Relative);
 }
 
 #[test]
 fn weighted_gradient_matches_central_differences() {
-    check_gradient(&t001(), 3);
+    check_gradient(&t001(), 3, ConstraintUnits::Absolute);
+    check_gradient(&t001(), 3, ConstraintUnits::Relative);
+}
+
+/// Relative units divide each constraint by a constant of the template: orthogonality by
+/// `|s⁰_b| |t⁰_γ|`, equal spokes by `2 |s⁰_{b_0}|²`. They are therefore dimensionless: the same
+/// values for a template and configuration both scaled by λ (absolute ones scale by λ²). At
+/// the template itself, the orthogonality values are the cosines of the angles between spokes
+/// and Loop tangents.
+#[test]
+fn relative_units_are_scaled_absolute_units_and_dimensionless() {
+    let t = t001();
+    let absolute = MedialConstraints::new(&t);
+    let relative = MedialConstraints::with_units(&t, ConstraintUnits::Relative).unwrap();
+    assert_eq!(relative.units(), ConstraintUnits::Relative);
+    assert_eq!(absolute.units(), ConstraintUnits::Absolute);
+    let q0 = t.landmarks();
+    let (a0, r0) = (values(&absolute, q0), values(&relative, q0));
+    let nb = t.boundary_count();
+    let tangents: Vec<Vec3> = [t.tangents().w1(), t.tangents().w2()]
+        .iter()
+        .flat_map(|w| {
+            let mut out = vec![Vec3::zeros(); nb];
+            for (b, row) in w.outer_iterator().enumerate() {
+                for (v, &weight) in row.iter() {
+                    out[b] += weight * q0[v];
+                }
+            }
+            out
+        })
+        .collect();
+    for b in 0..nb {
+        let spoke = q0[b] - q0[nb + t.medial_index()[b]];
+        for g in 0..2 {
+            let tangent = tangents[g * nb + b];
+            let cosine = spoke.dot(&tangent) / (spoke.norm() * tangent.norm());
+            assert!((r0[2 * b + g] - cosine).abs() < 1e-12);
+            assert!((r0[2 * b + g] * spoke.norm() * tangent.norm() - a0[2 * b + g]).abs() < 1e-12);
+        }
+    }
+    let lambda = 3.7;
+    let scaled = t
+        .with_landmarks(&q0.iter().map(|p| lambda * p).collect::<Vec<_>>())
+        .unwrap();
+    let q = perturbed(&t, 0.5, 11);
+    let q_scaled: Vec<Vec3> = q.iter().map(|p| lambda * p).collect();
+    let relative_scaled =
+        MedialConstraints::with_units(&scaled, ConstraintUnits::Relative).unwrap();
+    let absolute_scaled = MedialConstraints::new(&scaled);
+    let (r, rs) = (values(&relative, &q), values(&relative_scaled, &q_scaled));
+    let (a, as_) = (values(&absolute, &q), values(&absolute_scaled, &q_scaled));
+    for l in 0..r.len() {
+        assert!((r[l] - rs[l]).abs() <= 1e-9 * r[l].abs().max(1e-3), "{l}");
+        assert!((lambda * lambda * a[l] - as_[l]).abs() <= 1e-9 * as_[l].abs().max(1e-3));
+    }
 }
 
 /// A seam atom (3 spokes): two equal-spoke constraints, derivatives still exact.
@@ -279,8 +334,8 @@ fn three_spoke_atom_derivatives() {
     assert_eq!(merged.spokes(double).len(), 3);
     let c = MedialConstraints::new(&merged);
     assert_eq!(c.len(), 753 + 1);
-    check_jacobian(&merged, 4);
-    check_gradient(&merged, 5);
+    check_jacobian(&merged, 4, ConstraintUnits::Relative);
+    check_gradient(&merged, 5, ConstraintUnits::Absolute);
 }
 
 /// Rotation about `axis` (any length) by `angle`, then scaling by `scale`, then translation.
