@@ -81,6 +81,16 @@ pub enum AttachmentKind {
     Dice,
 }
 
+impl AttachmentKind {
+    /// The name used in a config.
+    pub fn name(self) -> &'static str {
+        match self {
+            AttachmentKind::Ssd => "ssd",
+            AttachmentKind::Dice => "dice",
+        }
+    }
+}
+
 /// When μ grows between augmented-Lagrangian iterations.
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
@@ -267,6 +277,22 @@ impl Config {
 
 impl StageConfig {
     fn check(&self) -> Result<(), String> {
+        let foreign = match self.attachment {
+            AttachmentKind::Ssd => [
+                ("image", self.image.is_some()),
+                ("label", self.label.is_some()),
+            ],
+            AttachmentKind::Dice => [
+                ("target", self.target.is_some()),
+                ("transform", self.transform.is_some()),
+            ],
+        };
+        if let Some((key, _)) = foreign.iter().find(|(_, given)| *given) {
+            return Err(format!(
+                "{key} does not apply to attachment = \"{}\"",
+                self.attachment.name()
+            ));
+        }
         match self.attachment {
             AttachmentKind::Ssd => match (&self.target, &self.transform) {
                 (Some(_), Some(_)) => {
@@ -364,7 +390,7 @@ target = "s.vtk"
             "target = \"s.vtk\"\ntransform = \"m.txt\"",
         );
         assert!(toml::from_str::<Config>(&both).unwrap().check().is_err());
-        let dice = MINIMAL.replace("\"ssd\"\ntarget", "\"dice\"\ntarget");
+        let dice = MINIMAL.replace("\"ssd\"\ntarget = \"s.vtk\"", "\"dice\"");
         assert!(toml::from_str::<Config>(&dice)
             .unwrap()
             .check()

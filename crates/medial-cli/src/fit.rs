@@ -2,6 +2,7 @@
 
 use crate::config::Config;
 use crate::error::CliError;
+use crate::inflate_cmd::write_options;
 use crate::model::Model;
 use crate::report::{write_json, Figures, Log, LogRow, Progress, StageSummary, Summary};
 use crate::stage::{self, Prepared};
@@ -9,7 +10,7 @@ use crate::time_points::{self, time_points};
 use medial_core::augmented_lagrangian::{run_stage, Stage};
 use medial_core::flow::{Flow, FlowParams, Trajectory};
 use medial_core::objective::ConstraintSet;
-use medial_io::vtk::{self, Encoding, WriteOptions};
+use medial_io::vtk;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -191,14 +192,7 @@ fn write_results(
         &[flow.time_steps(), k, 3],
         controls,
     )?;
-    let vtk_options = WriteOptions {
-        encoding: if config.output.binary_vtk {
-            Encoding::Binary
-        } else {
-            Encoding::Ascii
-        },
-        ..WriteOptions::default()
-    };
+    let vtk_options = write_options(config.output.binary_vtk);
     let last = trajectory.time_points() - 1;
     for n in 0..=last {
         if !config.output.every_time_point && n != 0 && n != last {
@@ -207,10 +201,10 @@ fn write_results(
         let q = trajectory.positions(n);
         vtk::write_polydata(
             &out.join(format!("flow/boundary_t{n:03}.vtk")),
-            &model.boundary_polydata(&q),
+            &model.boundary_polydata(q),
             vtk_options,
         )?;
-        if let Some(medial) = model.medial_polydata(&q) {
+        if let Some(medial) = model.medial_polydata(q) {
             vtk::write_polydata(
                 &out.join(format!("flow/medial_t{n:03}.vtk")),
                 &medial,
@@ -221,8 +215,8 @@ fn write_results(
     let q = trajectory.final_positions();
     let fitted = out.join("fitted_template.vtk");
     match model.medial() {
-        Some(t) => medial_io::cmrep::write_template(&fitted, &t.with_landmarks(&q)?, vtk_options)?,
-        None => vtk::write_polydata(&fitted, &model.boundary_polydata(&q), vtk_options)?,
+        Some(t) => medial_io::cmrep::write_template(&fitted, &t.with_landmarks(q)?, vtk_options)?,
+        None => vtk::write_polydata(&fitted, &model.boundary_polydata(q), vtk_options)?,
     }
     Ok(())
 }

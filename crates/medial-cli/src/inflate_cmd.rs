@@ -5,6 +5,7 @@ use crate::error::CliError;
 use medial_core::inflate::{inflate, MedialSheet};
 use medial_core::metrics::SpokeMetrics;
 use medial_core::template::{MedialTemplate, MAX_SPOKES};
+use medial_core::topology::signed_volume;
 use medial_io::vtk::{self, Encoding, WriteOptions};
 use serde::Serialize;
 use std::io::Write as _;
@@ -109,12 +110,7 @@ impl TemplateSummary {
         for m in 0..template.medial_count() {
             atoms_by_spokes[template.spokes(m).len() - 1] += 1;
         }
-        let p = template.boundary_points();
-        let volume_mm3 = template
-            .boundary_triangles()
-            .iter()
-            .map(|t| p[t[0]].dot(&p[t[1]].cross(&p[t[2]])) / 6.0)
-            .sum();
+        let volume_mm3 = signed_volume(template.boundary_points(), template.boundary_triangles());
         Self {
             boundary_points: template.boundary_count(),
             boundary_triangles: template.boundary_triangles().len(),

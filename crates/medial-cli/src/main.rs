@@ -37,7 +37,8 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Run the stages of a TOML config and write summary.json, log.csv, momenta.npy, the flow
-    /// of the model (flow/boundary_tNNN.vtk, flow/medial_tNNN.vtk) and fitted_template.vtk.
+    /// of the model (flow/boundary_tNNN.vtk, flow/medial_tNNN.vtk), time_points.csv (medial
+    /// templates) and fitted_template.vtk.
     Fit {
         /// The config file (TOML); relative paths in it are relative to its folder.
         config: PathBuf,
@@ -120,10 +121,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
                     quiet: cli.quiet,
                 },
             )?;
-            println!(
-                "{}",
-                serde_json::to_string_pretty(&summary.final_figures).expect("figures serialise")
-            );
+            inflate_cmd::print_json(&summary.final_figures)?;
             eprintln!("results in {}", out.display());
         }
         Command::Eval {
@@ -145,10 +143,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
                     gradient,
                 },
             )?;
-            println!(
-                "{}",
-                serde_json::to_string_pretty(&figures).expect("figures serialise")
-            );
+            inflate_cmd::print_json(&figures)?;
         }
         Command::Inflate(args) => inflate_cmd::run(&args)?,
         Command::Project(args) => project_cmd::run(&args)?,

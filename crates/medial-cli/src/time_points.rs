@@ -51,9 +51,9 @@ pub fn time_points(model: &Model, trajectory: &Trajectory) -> Vec<TimePoint> {
         .map(|n| {
             let q = trajectory.positions(n);
             let m = model
-                .metrics(&q)
+                .metrics(q)
                 .expect("a medial template has spoke metrics");
-            constraints.evaluate(&q, &mut values);
+            constraints.evaluate(q, &mut values);
             TimePoint {
                 index: n,
                 t: n as f64 / last.max(1) as f64,

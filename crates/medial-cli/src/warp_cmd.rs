@@ -17,6 +17,7 @@ use medial_core::synth::{
     boundary_mesh, target_boundary, target_image, target_surface, PrincipalAxes, Warp,
 };
 use medial_core::template::MedialTemplate;
+use medial_core::topology::signed_volume;
 use medial_core::{TriMesh, Vec3};
 use nalgebra::{Matrix4, Rotation3, Unit};
 use serde::Serialize;
@@ -192,7 +193,7 @@ pub fn run(args: &WarpArgs) -> Result<(), CliError> {
     let warp = build_warp(args, &axes)?;
     let target = target_boundary(&boundary, &warp).map_err(in_template)?;
     let surface = target_surface(&boundary, &warp).map_err(in_template)?;
-    let image = target_image(&boundary, &warp, args.spacing, args.margin)?;
+    let image = target_image(&surface, args.spacing, args.margin)?;
     let geometry = Geometry::of(&template, &boundary, &axes);
     let plan = geometry.plan();
     let header = header(args, &warp, &geometry);
@@ -235,7 +236,7 @@ pub fn run(args: &WarpArgs) -> Result<(), CliError> {
         image_dims: image.dims(),
         image_spacing_mm: args.spacing,
         target_volume_mm3: image.integral(),
-        target_surface_volume_mm3: enclosed_volume(&surface),
+        target_surface_volume_mm3: signed_volume(surface.points(), surface.triangles()),
         affine_volume_mm3: warp.linear.determinant() * template_summary.volume_mm3,
         template: template_summary,
         fit: geometry,
@@ -337,15 +338,6 @@ fn file_name(path: &Path) -> String {
         .unwrap_or(path.as_os_str())
         .to_string_lossy()
         .into_owned()
-}
-
-/// Volume enclosed by a closed, outward-oriented mesh (divergence theorem), mm³.
-fn enclosed_volume(mesh: &TriMesh) -> f64 {
-    let p = mesh.points();
-    mesh.triangles()
-        .iter()
-        .map(|t| p[t[0]].dot(&p[t[1]].cross(&p[t[2]])) / 6.0)
-        .sum()
 }
 
 fn mean(values: impl Iterator<Item = f64>) -> f64 {

@@ -65,7 +65,7 @@ fn bent_t001_boundary_fit_stays_medial_only_with_constraints() {
 }
 
 /// The paper's schedule against the rasterized warped shape (0.5 mm voxels): SSD to the affine
-/// part, then Dice with μ rising from 0.001. The Dice estimate of t001 cannot exceed about
+/// part, then Dice with μ rising tenfold per AL iteration. The Dice estimate of t001 cannot exceed about
 /// 0.91 (the template against its own rasterization: the blur of the image edge on a 2.8 mm
 /// wall), so the fit is judged by its voxel overlap and the spoke figures.
 #[test]

@@ -12,12 +12,7 @@ use medial_core::Vec3;
 use serde_json::Value;
 use std::path::Path;
 
-fn volume(points: &[Vec3], triangles: &[[usize; 3]]) -> f64 {
-    triangles
-        .iter()
-        .map(|t| points[t[0]].dot(&points[t[1]].cross(&points[t[2]])) / 6.0)
-        .sum()
-}
+use medial_core::topology::signed_volume as volume;
 
 #[test]
 fn placenta_inflated_projected_and_compared_with_cmrep() {

@@ -56,12 +56,12 @@ impl Trajectory {
     }
 
     /// Landmark positions `q^n`.
-    pub fn positions(&self, n: usize) -> Vec<Vec3> {
-        self.positions[n].clone()
+    pub fn positions(&self, n: usize) -> &[Vec3] {
+        &self.positions[n]
     }
 
     /// Landmark positions `q^N`.
-    pub fn final_positions(&self) -> Vec<Vec3> {
+    pub fn final_positions(&self) -> &[Vec3] {
         self.positions(self.positions.len() - 1)
     }
 

@@ -127,7 +127,7 @@ impl<'a> Objective<'a> {
         let mut terminal = vec![Vec3::zeros(); k];
         let data = self
             .attachment
-            .evaluate(&q_final, grad.is_some().then_some(&mut terminal[..]))?;
+            .evaluate(q_final, grad.is_some().then_some(&mut terminal[..]))?;
         terminal.iter_mut().for_each(|g| *g *= self.data_weight);
         let constraint_values = self.constraint_values_of(&trajectory);
         let (penalty, max_abs_constraint) = self.penalty_value(&constraint_values);
@@ -138,13 +138,14 @@ impl<'a> Objective<'a> {
             return Err(Error::NonFinite(format!("objective is {total}")));
         }
         if let Some(grad) = grad {
+            let weights = self.penalty_weights(&constraint_values);
             let n_steps = self.flow.time_steps();
-            self.add_penalty_gradient(n_steps, &q_final, &constraint_values, &mut terminal);
+            self.add_penalty_gradient(n_steps, q_final, &weights, &mut terminal);
             self.flow.backward(
                 &trajectory,
                 u,
                 &terminal,
-                |n, q, a| self.add_penalty_gradient(n, q, &constraint_values, a),
+                |n, q, a| self.add_penalty_gradient(n, q, &weights, a),
                 grad,
             )?;
         }
@@ -155,7 +156,7 @@ impl<'a> Objective<'a> {
             penalty,
             max_abs_constraint,
             dice: data.dice,
-            final_positions: q_final,
+            final_positions: q_final.to_vec(),
         })
     }
 
@@ -172,7 +173,7 @@ impl<'a> Objective<'a> {
         let l = p.constraints.len();
         let mut values = vec![0.0; self.flow.time_steps() * l];
         for (n, out) in (1..).zip(values.chunks_exact_mut(l.max(1))) {
-            p.constraints.evaluate(&trajectory.positions(n), out);
+            p.constraints.evaluate(trajectory.positions(n), out);
         }
         values
     }
@@ -190,16 +191,24 @@ impl<'a> Objective<'a> {
         (value, values.iter().fold(0.0f64, |m, c| m.max(c.abs())))
     }
 
-    /// `a += Σ_l (μ C_l − λ^n_l) ∇C_l(q^n)`.
-    fn add_penalty_gradient(&self, n: usize, q: &[Vec3], values: &[f64], a: &mut [Vec3]) {
+    /// `∂P/∂C^n_l = μ C^n_l − λ^n_l` for every time point and constraint (empty without a
+    /// penalty).
+    fn penalty_weights(&self, values: &[f64]) -> Vec<f64> {
+        let Some(p) = &self.penalty else {
+            return Vec::new();
+        };
+        values
+            .iter()
+            .zip(p.lambda)
+            .map(|(c, lam)| p.mu * c - lam)
+            .collect()
+    }
+
+    /// `a += Σ_l (μ C^n_l − λ^n_l) ∇C_l(q^n)`, with the weights of [`Self::penalty_weights`].
+    fn add_penalty_gradient(&self, n: usize, q: &[Vec3], weights: &[f64], a: &mut [Vec3]) {
         let Some(p) = &self.penalty else { return };
         let l = p.constraints.len();
-        let range = (n - 1) * l..n * l;
-        let weights: Vec<f64> = values[range.clone()]
-            .iter()
-            .zip(&p.lambda[range])
-            .map(|(c, lam)| p.mu * c - lam)
-            .collect();
-        p.constraints.accumulate_gradient(q, &weights, a);
+        p.constraints
+            .accumulate_gradient(q, &weights[(n - 1) * l..n * l], a);
     }
 }

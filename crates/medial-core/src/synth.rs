@@ -480,20 +480,14 @@ pub fn target_surface(boundary: &TriMesh, warp: &Warp) -> Result<TriMesh> {
     target_boundary(&mesh, warp)
 }
 
-/// The target segmentation: [`target_surface`] rasterized (1 inside, 0 outside) on an
-/// axis-aligned grid of spacing `spacing_mm` around it with `margin_mm` on every side (see
-/// [`grid_around`]).
+/// The target segmentation: the closed `surface` (a [`target_surface`]) rasterized (1 inside,
+/// 0 outside) on an axis-aligned grid of spacing `spacing_mm` around it with `margin_mm` on
+/// every side (see [`grid_around`]).
 ///
-/// Errors: as [`target_surface`], [`grid_around`] and [`rasterize`] (an open boundary).
-pub fn target_image(
-    boundary: &TriMesh,
-    warp: &Warp,
-    spacing_mm: f64,
-    margin_mm: f64,
-) -> Result<Volume> {
-    let surface = target_surface(boundary, warp)?;
-    let (dims, voxel_to_world) = grid_around(&surface, spacing_mm, margin_mm)?;
-    rasterize(&surface, dims, voxel_to_world)
+/// Errors: as [`grid_around`] and [`rasterize`] (an open surface).
+pub fn target_image(surface: &TriMesh, spacing_mm: f64, margin_mm: f64) -> Result<Volume> {
+    let (dims, voxel_to_world) = grid_around(surface, spacing_mm, margin_mm)?;
+    rasterize(surface, dims, voxel_to_world)
 }
 
 /// A synthetic case: its template (with the figures of its projection) and its warp.
@@ -560,7 +554,7 @@ impl SyntheticCase {
     /// [`target_image`] of the template: the target surface rasterized with voxels of
     /// `spacing_mm` and `margin_mm` around it.
     pub fn target_image(&self, spacing_mm: f64, margin_mm: f64) -> Result<Volume> {
-        target_image(&self.boundary()?, &self.warp, spacing_mm, margin_mm)
+        target_image(&self.target_surface()?, spacing_mm, margin_mm)
     }
 }
 

@@ -209,7 +209,7 @@ proptest! {
         let flow = flow_of(&case);
         let zero = vec![0.0; case.controls.len()];
         let trajectory = flow.shoot(&case.template, &zero).unwrap();
-        prop_assert_eq!(trajectory.final_positions(), case.template.clone());
+        prop_assert_eq!(trajectory.final_positions(), &case.template[..]);
         prop_assert_eq!(trajectory.kinetic_energy(), 0.0);
     }
 

@@ -44,11 +44,7 @@ fn spoke_histogram(t: &MedialTemplate) -> [usize; 3] {
 }
 
 fn volume(mesh: &TriMesh) -> f64 {
-    let p = mesh.points();
-    mesh.triangles()
-        .iter()
-        .map(|t| p[t[0]].dot(&p[t[1]].cross(&p[t[2]])) / 6.0)
-        .sum()
+    medial_core::topology::signed_volume(mesh.points(), mesh.triangles())
 }
 
 /// Centroid of the solid bounded by `mesh` (divergence theorem over tetrahedra to the origin).
@@ -651,7 +647,7 @@ fn a_template_becomes_a_synthetic_case() {
     );
     assert!((ratio - 1.0).abs() < 0.01, "{ratio}");
     assert!((vs / (det * v0) - 1.0).abs() < 0.03, "{}", vs / (det * v0));
-    let image = target_image(&boundary, &w, 0.5, 2.0).unwrap();
+    let image = target_image(&target_surface(&boundary, &w).unwrap(), 0.5, 2.0).unwrap();
     let raster = image.integral();
     println!(
         "t001 target image {:?}, volume {raster:.1} mm³",

@@ -47,7 +47,8 @@ pub enum ArrayKind {
 /// The element type of an array in the file; values are held as `f64` in memory.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ValueType {
-    /// Any integer type (`int`, `long`, `vtkIdType`, `unsigned_char`, ...); written as `int`.
+    /// Any integer type (`int`, `long`, `vtkIdType`, `unsigned_char`, ...); written as `int`,
+    /// or `vtktypeint64` when a value does not fit, or `double` when one is not an integer.
     Int,
     /// `float` (32 bits).
     Float,

@@ -102,7 +102,8 @@ fn obj_and_vtk_round_trip() {
         assert_eq!(read_mesh(&path).expect("read back"), mesh, "{name}");
     }
     let obj = std::fs::read_to_string(dir.path().join("m.obj")).expect("obj text");
-    assert!(obj.lines().any(|l| l == "f 1 2 3" || l.starts_with("f ")));
+    let faces = obj.lines().filter(|l| l.starts_with("f ")).count();
+    assert_eq!(faces, mesh.triangles().len());
     assert_eq!(obj.lines().filter(|l| l.starts_with("v ")).count(), 662);
 }
 
