@@ -68,11 +68,13 @@ pub fn read_nifti(path: &Path) -> Result<Volume> {
         .into_volume()
         .into_ndarray::<f64>()
         .map_err(|e| nifti_error(path, e))?;
-    // NIfTI data are in Fortran order (x fastest), as are the arrays the crate builds.
-    let data = array
-        .as_slice_memory_order()
-        .ok_or_else(|| Error::format(path, "voxel data are not contiguous"))?
-        .to_vec();
+    // NIfTI data are in Fortran order (x fastest), as are the arrays the crate builds: the
+    // array's own buffer is the voxel data, taken without a copy.
+    let contiguous = array.as_slice_memory_order().map(<[f64]>::len);
+    let (data, offset) = array.into_raw_vec_and_offset();
+    if contiguous != Some(data.len()) || offset.unwrap_or(0) != 0 {
+        return Err(Error::format(path, "voxel data are not contiguous"));
+    }
     Volume::new(dims, data, affine).map_err(|e| Error::model(path, e))
 }
 

@@ -1500,7 +1500,8 @@ impl Writer {
                     if i > 0 {
                         self.out.push(b' ');
                     }
-                    self.text(&value.to_string());
+                    // Writing into a Vec<u8> cannot fail.
+                    let _ = write!(self.out, "{value}");
                 }
             }
             if !self.binary {
