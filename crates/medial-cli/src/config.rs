@@ -102,7 +102,7 @@ pub enum MuUpdateConfig {
     IfNotHalved,
 }
 
-/// The unit of the medial constraints (see `medial_core::constraints::ConstraintUnits`).
+/// The unit of the medial constraints (see `medial_core::model::constraints::ConstraintUnits`).
 #[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum ConstraintUnitsConfig {

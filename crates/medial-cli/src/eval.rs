@@ -6,7 +6,7 @@ use crate::fit::{end_figures, flow_of};
 use crate::model::Model;
 use crate::report::Figures;
 use crate::stage;
-use medial_core::objective::{ConstraintSet, Objective, Penalty};
+use medial_core::fit::objective::{ConstraintSet, Objective, Penalty};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `medial eval` beyond the config.

@@ -7,9 +7,9 @@ use crate::model::Model;
 use crate::report::{write_json, Figures, Log, LogRow, Progress, StageSummary, Summary};
 use crate::stage::{self, Prepared};
 use crate::time_points::{self, time_points};
-use medial_core::augmented_lagrangian::{run_stage, Stage};
+use medial_core::fit::augmented_lagrangian::{run_stage, Stage};
+use medial_core::fit::objective::ConstraintSet;
 use medial_core::flow::{Flow, FlowParams, Trajectory};
-use medial_core::objective::ConstraintSet;
 use medial_io::vtk;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -151,7 +151,7 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
 pub fn figures_at(
     model: &Model,
     prepared: &Prepared,
-    e: &medial_core::objective::Evaluation,
+    e: &medial_core::fit::objective::Evaluation,
     q: &[medial_core::Vec3],
 ) -> Figures {
     let metrics = model.metrics(q);
@@ -167,7 +167,7 @@ pub fn figures_at(
 pub fn end_figures(
     model: &Model,
     prepared: &Prepared,
-    e: &medial_core::objective::Evaluation,
+    e: &medial_core::fit::objective::Evaluation,
 ) -> Result<Figures, CliError> {
     let q = &e.final_positions;
     Ok(Figures {

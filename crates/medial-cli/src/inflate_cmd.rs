@@ -2,10 +2,10 @@
 //! (SPEC §9), optionally Loop-subdivided first. Prints a JSON summary of the template.
 
 use crate::error::CliError;
-use medial_core::inflate::{inflate, MedialSheet};
-use medial_core::metrics::SpokeMetrics;
-use medial_core::template::{MedialTemplate, MAX_SPOKES};
-use medial_core::topology::signed_volume;
+use medial_core::build::inflate::{inflate, MedialSheet};
+use medial_core::mesh::topology::signed_volume;
+use medial_core::model::metrics::SpokeMetrics;
+use medial_core::model::template::{MedialTemplate, MAX_SPOKES};
 use medial_io::vtk::{self, Encoding, WriteOptions};
 use serde::Serialize;
 use std::io::Write as _;

@@ -3,9 +3,9 @@
 //! landmarks is written for ParaView.
 
 use crate::error::CliError;
-use medial_core::constraints::MedialConstraints;
-use medial_core::metrics::SpokeMetrics;
-use medial_core::template::MedialTemplate;
+use medial_core::model::constraints::MedialConstraints;
+use medial_core::model::metrics::SpokeMetrics;
+use medial_core::model::template::MedialTemplate;
 use medial_core::Vec3;
 use medial_io::vtk::{self, ArrayKind, DataArray, PolyData, ValueType};
 use std::path::Path;

@@ -3,7 +3,7 @@
 
 use crate::error::CliError;
 use crate::inflate_cmd::{model_error, print_json};
-use medial_core::rasterize::{grid_around, rasterize};
+use medial_core::image::rasterize::{grid_around, rasterize};
 use medial_io::nifti_volume::{write_nifti, NiftiType};
 use serde::Serialize;
 use std::path::PathBuf;

@@ -3,8 +3,8 @@
 
 use crate::error::CliError;
 use crate::time_points::OverTime;
-use medial_core::metrics::SpokeMetrics;
-use medial_core::objective::Evaluation;
+use medial_core::fit::objective::Evaluation;
+use medial_core::model::metrics::SpokeMetrics;
 use serde::Serialize;
 use std::io::{BufWriter, IsTerminal, Write};
 use std::path::{Path, PathBuf};

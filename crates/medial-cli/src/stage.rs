@@ -7,11 +7,11 @@ use crate::model::Model;
 use medial_core::attachment::dice::{DiceAttachment, DiceParams};
 use medial_core::attachment::ssd::Ssd;
 use medial_core::attachment::Attachment;
-use medial_core::augmented_lagrangian::{AlSchedule, MuUpdate};
-use medial_core::constraints::{ConstraintUnits, MedialConstraints};
-use medial_core::optimize::LbfgsOptions;
-use medial_core::rasterize::voxel_dice;
-use medial_core::volume::Volume;
+use medial_core::fit::augmented_lagrangian::{AlSchedule, MuUpdate};
+use medial_core::fit::optimize::LbfgsOptions;
+use medial_core::image::rasterize::voxel_dice;
+use medial_core::image::volume::Volume;
+use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
 use medial_core::{TriMesh, Vec3};
 use std::path::Path;
 
@@ -209,7 +209,7 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), 
 }
 
 /// A volume from NIfTI (`.nii`, `.nii.gz`) or OpenEXR (`.exr`).
-pub fn read_volume(path: &Path) -> Result<medial_core::volume::Volume, CliError> {
+pub fn read_volume(path: &Path) -> Result<medial_core::image::volume::Volume, CliError> {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().to_lowercase())

@@ -8,9 +8,9 @@
 
 use crate::error::CliError;
 use crate::inflate_cmd::{print_json, write_options, TemplateSummary};
+use medial_core::image::volume::Volume;
+use medial_core::model::template::MedialTemplate;
 use medial_core::synth::{Shape, SyntheticCase};
-use medial_core::template::MedialTemplate;
-use medial_core::volume::Volume;
 use medial_core::TriMesh;
 use medial_io::nifti_volume::{write_nifti, NiftiType};
 use medial_io::vtk::{self, PolyData};

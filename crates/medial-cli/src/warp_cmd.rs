@@ -13,11 +13,11 @@ use crate::error::CliError;
 use crate::inflate_cmd::{model_error, print_json, TemplateSummary};
 use crate::stage::read_affine;
 use crate::synth_cmd::{CaseFiles, FitPlan};
+use medial_core::mesh::topology::signed_volume;
+use medial_core::model::template::MedialTemplate;
 use medial_core::synth::{
     boundary_mesh, target_boundary, target_image, target_surface, PrincipalAxes, Warp,
 };
-use medial_core::template::MedialTemplate;
-use medial_core::topology::signed_volume;
 use medial_core::{TriMesh, Vec3};
 use nalgebra::{Matrix4, Rotation3, Unit};
 use serde::Serialize;

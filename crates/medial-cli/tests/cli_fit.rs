@@ -102,7 +102,7 @@ fn fit_writes_every_output_and_matches_an_affine_target() {
     check_time_points(&out, &summary);
     let fitted = medial_io::cmrep::read_template(&out.join("fitted_template.vtk")).unwrap();
     assert_eq!(fitted.landmark_count(), 503);
-    let metrics = medial_core::metrics::SpokeMetrics::compute(&fitted, fitted.landmarks());
+    let metrics = medial_core::model::metrics::SpokeMetrics::compute(&fitted, fitted.landmarks());
     let reported = last["max_spoke_normal_deg"].as_f64().unwrap();
     assert!(
         (metrics.max_spoke_normal_deg - reported).abs() < 1e-6,

@@ -6,13 +6,13 @@
 mod common;
 
 use common::{data, f, run_fails, run_json, s, text};
-use medial_core::metrics::SpokeMetrics;
-use medial_core::template::MedialTemplate;
+use medial_core::model::metrics::SpokeMetrics;
+use medial_core::model::template::MedialTemplate;
 use medial_core::Vec3;
 use serde_json::Value;
 use std::path::Path;
 
-use medial_core::topology::signed_volume as volume;
+use medial_core::mesh::topology::signed_volume as volume;
 
 #[test]
 fn placenta_inflated_projected_and_compared_with_cmrep() {

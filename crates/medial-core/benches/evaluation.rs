@@ -1,16 +1,17 @@
 //! One value + gradient evaluation of the objective (flow, kinetic energy, SSD, adjoint) with
 //! N = 40 time steps on real shapes: the t001 medial template (k = 503), and the KeOps
 //! hippocampus (k = 2,000 of its points, and all 6,611). The dense textbook implementation
-//! (`naive`) is measured in the same run as the baseline the ratios are stated against (up to
+//! (`medial_core::testing::dense`) is measured in the same run as the baseline the ratios are stated against (up to
 //! k = 2,000: it holds `N` dense `k × k` matrices). The throughput is stated in pair-steps,
 //! `N·k(k−1)/2` per evaluation, so criterion also reports the time per pair and step.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use medial_core::attachment::ssd::Ssd;
 use medial_core::attachment::Attachment;
+use medial_core::fit::objective::Objective;
 use medial_core::flow::{Flow, FlowParams};
-use medial_core::objective::Objective;
-use medial_core::{naive, Vec3};
+use medial_core::testing::dense;
+use medial_core::Vec3;
 use std::path::Path;
 
 const STEPS: usize = 40;
@@ -76,10 +77,10 @@ fn evaluation(c: &mut Criterion) {
         });
         if k <= 2000 {
             group.bench_function(
-                BenchmarkId::new("naive_dense", format!("{name}_k{k}")),
+                BenchmarkId::new("dense_baseline", format!("{name}_k{k}")),
                 |b| {
                     b.iter(|| {
-                        naive::objective(&q, &u, sigma, STEPS, 0.05, |n, q| {
+                        dense::objective(&q, &u, sigma, STEPS, 0.05, |n, q| {
                             if n < STEPS {
                                 return (0.0, vec![Vec3::zeros(); q.len()]);
                             }

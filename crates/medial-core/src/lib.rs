@@ -9,28 +9,38 @@
 //!
 //! The crate knows nothing about files or terminals: `medial-io` reads and writes, the
 //! `medial` binary wires them together.
+//!
+//! ## Contents
+//!
+//! | module | what it holds | entry points |
+//! |---|---|---|
+//! | [`mesh`] | points, triangle meshes, closed-surface topology | [`TriMesh`], [`mesh::topology`] |
+//! | [`model`] | the medial template, Loop tangents, medial constraints, spoke metrics | [`MedialTemplate`], [`model::MedialConstraints`], [`model::SpokeMetrics`] |
+//! | [`flow`] | the kernel flow of the landmarks and its exact adjoint; the kernel sums | [`flow::Flow`], [`flow::kernel::GaussianKernel`] |
+//! | [`attachment`] | data terms: SSD to corresponding points, Dice against an image | [`attachment::ssd::Ssd`], [`attachment::dice::DiceAttachment`] |
+//! | [`image`] | volumes in world space, rasterization of closed meshes | [`image::Volume`], [`image::rasterize`] |
+//! | [`fit`] | objective, L-BFGS, the augmented-Lagrangian schedule of a stage | [`fit::Objective`], [`fit::run_stage`] |
+//! | [`build`] | templates from a medial sheet: inflation, projection onto the constraints | [`build::inflate()`], [`build::project()`] |
+//! | [`synth`] | synthetic cases with a known deformation | [`synth::SyntheticCase`], [`synth::Warp`] |
+//! | [`testing`] | the dense reference implementation and small fixtures | [`testing::dense`] |
+//!
+//! Data flows one way: a [`MedialTemplate`] and an attachment go into a [`fit::Stage`], a
+//! stage runs from the controls of the previous one, and its outcome holds the controls from
+//! which [`flow::Flow::shoot`] gives the fitted model at every time point.
+
+#![warn(missing_docs)]
 
 pub mod attachment;
-pub mod augmented_lagrangian;
-pub mod constraints;
+pub mod build;
 pub mod error;
+pub mod fit;
 pub mod flow;
-pub mod geometry;
-pub mod inflate;
-pub mod kernel;
-pub mod loop_tangent;
-pub mod metrics;
-pub mod naive;
-pub mod objective;
-pub mod optimize;
-pub mod project;
-pub mod rasterize;
+pub mod image;
+pub mod mesh;
+pub mod model;
 pub mod synth;
-pub mod template;
-#[cfg(test)]
-mod test_meshes;
-pub mod topology;
-pub mod volume;
+pub mod testing;
 
 pub use error::{Error, Result};
-pub use geometry::{TriMesh, Vec3};
+pub use mesh::{TriMesh, Vec3};
+pub use model::MedialTemplate;

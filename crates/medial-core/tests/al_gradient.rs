@@ -2,9 +2,9 @@
 //! (cmrep's t001, k = 503, L = 753): its exact gradient against central finite differences.
 
 use medial_core::attachment::ssd::Ssd;
-use medial_core::constraints::{ConstraintUnits, MedialConstraints};
+use medial_core::fit::objective::{Objective, Penalty};
 use medial_core::flow::{Flow, FlowParams};
-use medial_core::objective::{Objective, Penalty};
+use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
 use medial_core::Vec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

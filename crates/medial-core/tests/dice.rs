@@ -5,8 +5,8 @@
 use std::time::Instant;
 
 use medial_core::attachment::dice::{DiceAttachment, DiceParams, DiceValue};
-use medial_core::rasterize::{self, grid_around, rasterize};
-use medial_core::volume::Volume;
+use medial_core::image::rasterize::{self, grid_around, rasterize};
+use medial_core::image::volume::Volume;
 use medial_core::{TriMesh, Vec3};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};

@@ -3,9 +3,9 @@
 
 use medial_core::attachment::ssd::Ssd;
 use medial_core::attachment::Attachment;
+use medial_core::fit::objective::{ConstraintSet, Objective, Penalty};
 use medial_core::flow::{Flow, FlowParams};
-use medial_core::naive;
-use medial_core::objective::{ConstraintSet, Objective, Penalty};
+use medial_core::testing::dense;
 use medial_core::Vec3;
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
@@ -132,7 +132,7 @@ fn gradient_matches_dense_implementation() {
         let ssd = Ssd::new(case.targets.clone()).unwrap();
         let steps = case.params.time_steps;
         let l = case.constraints.len();
-        let (dense_value, dense_grad) = naive::objective(
+        let (dense_value, dense_grad) = dense::objective(
             &case.template,
             &case.controls,
             case.params.sigma,

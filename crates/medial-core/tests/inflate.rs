@@ -5,14 +5,12 @@ use std::collections::{BTreeMap, HashMap};
 use std::f64::consts::PI;
 use std::path::Path;
 
-use medial_core::inflate::{inflate, Inflated, MedialSheet};
+use medial_core::build::inflate::{inflate, Inflated, MedialSheet};
 use medial_core::synth::parameter_grid;
 use medial_core::{Error, Vec3};
 use proptest::prelude::*;
 
-#[path = "../src/test_meshes.rs"]
-mod test_meshes;
-use test_meshes::octahedron;
+use medial_core::testing::meshes::octahedron;
 
 const CMREP: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/cmrep/");
 
@@ -709,8 +707,11 @@ fn inflated_templates_are_accepted_by_medial_template() {
             medial_points,
         } = inflate(&sheet).unwrap();
         let nb = boundary.points().len();
-        let template =
-            medial_core::template::MedialTemplate::new(boundary, medial_index, medial_points);
+        let template = medial_core::model::template::MedialTemplate::new(
+            boundary,
+            medial_index,
+            medial_points,
+        );
         assert!(
             template.is_ok(),
             "{nb} boundary points: {:?}",

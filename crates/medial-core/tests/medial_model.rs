@@ -2,9 +2,9 @@
 //! constraint values against direct formulas, Jacobian and weighted gradient against central
 //! finite differences, and invariance under similarity transforms.
 
-use medial_core::constraints::{ConstraintUnits, MedialConstraints};
-use medial_core::metrics::SpokeMetrics;
-use medial_core::template::MedialTemplate;
+use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
+use medial_core::model::metrics::SpokeMetrics;
+use medial_core::model::template::MedialTemplate;
 use medial_core::{TriMesh, Vec3};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};

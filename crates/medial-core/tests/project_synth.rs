@@ -4,14 +4,14 @@
 
 use std::path::Path;
 
-use medial_core::inflate::{inflate, MedialSheet};
-use medial_core::metrics::SpokeMetrics;
-use medial_core::project::{project, ProjectOptions};
+use medial_core::build::inflate::{inflate, MedialSheet};
+use medial_core::build::project::{project, ProjectOptions};
+use medial_core::model::metrics::SpokeMetrics;
+use medial_core::model::template::MedialTemplate;
 use medial_core::synth::{
     boundary_mesh, midpoint_subdivide, target_boundary, target_image, target_surface,
     PrincipalAxes, Shape, SyntheticCase, Warp,
 };
-use medial_core::template::MedialTemplate;
 use medial_core::{Error, TriMesh, Vec3};
 use nalgebra::{Matrix3, Matrix4, Rotation3, Unit};
 use proptest::prelude::*;
@@ -44,7 +44,7 @@ fn spoke_histogram(t: &MedialTemplate) -> [usize; 3] {
 }
 
 fn volume(mesh: &TriMesh) -> f64 {
-    medial_core::topology::signed_volume(mesh.points(), mesh.triangles())
+    medial_core::mesh::topology::signed_volume(mesh.points(), mesh.triangles())
 }
 
 /// Centroid of the solid bounded by `mesh` (divergence theorem over tetrahedra to the origin).

@@ -14,8 +14,8 @@
 
 use std::path::Path;
 
-use medial_core::metrics::SpokeMetrics;
-use medial_core::template::MedialTemplate;
+use medial_core::model::metrics::SpokeMetrics;
+use medial_core::model::template::MedialTemplate;
 use medial_core::{TriMesh, Vec3};
 
 use crate::vtk::{

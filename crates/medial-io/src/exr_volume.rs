@@ -22,7 +22,7 @@ use exr::prelude::{
     AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer, LayerAttributes,
     SmallVec, Text,
 };
-use medial_core::volume::Volume;
+use medial_core::image::volume::Volume;
 use nalgebra::Matrix4;
 
 use crate::atomic::write_atomic;

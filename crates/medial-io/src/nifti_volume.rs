@@ -23,7 +23,7 @@
 
 use std::path::Path;
 
-use medial_core::volume::Volume;
+use medial_core::image::volume::Volume;
 use medial_core::Vec3;
 use nalgebra::{Matrix3, Matrix4, Quaternion, UnitQuaternion};
 use nifti::writer::WriterOptions;

@@ -2,8 +2,8 @@
 //! every encoding and layout, and the refusal of broken files with messages that say what and
 //! where.
 
-use medial_core::constraints::MedialConstraints;
-use medial_core::metrics::SpokeMetrics;
+use medial_core::model::constraints::MedialConstraints;
+use medial_core::model::metrics::SpokeMetrics;
 use medial_core::Vec3;
 use medial_io::cmrep::{
     read_template, template_from_polydata, template_to_polydata, write_template,

@@ -5,7 +5,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use flate2::write::GzEncoder;
-use medial_core::volume::Volume;
+use medial_core::image::volume::Volume;
 use medial_core::Vec3;
 use medial_io::exr_volume::{read_exr_volume, write_exr_volume, AFFINE_ATTRIBUTE, DIMS_ATTRIBUTE};
 use medial_io::nifti_volume::{read_nifti, write_nifti, NiftiType};

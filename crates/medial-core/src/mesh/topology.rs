@@ -211,11 +211,10 @@ fn edge_problem(uses: &[EdgeUse]) -> Option<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_meshes;
 
-    /// The regular octahedron of [`test_meshes::octahedron`], outward oriented.
+    /// The regular octahedron of [`crate::testing::meshes::octahedron`], outward oriented.
     fn octahedron() -> TriMesh {
-        let (points, triangles) = test_meshes::octahedron();
+        let (points, triangles) = crate::testing::meshes::octahedron();
         TriMesh::new(points, triangles).expect("valid octahedron")
     }
 

@@ -8,7 +8,7 @@
 //!   `a^n_i = a^{n+1}_i + ∇P^n_i − (dt/σ²) Σ_j K^n_ij [a^{n+1}_i·u^n_j + a^{n+1}_j·u^n_i + w u^n_i·u^n_j] (q^n_i − q^n_j)`,
 //!   and `∂E/∂u^n_i = dt Σ_j K^n_ij (a^{n+1}_j + w u^n_j)`.
 //!
-//! Each step of each pass is one fused sweep over the pairs (see [`crate::kernel`]): one kernel
+//! Each step of each pass is one fused sweep over the pairs (see [`crate::flow::kernel`]): one kernel
 //! evaluation per unordered pair, in parallel tiles whose partial sums are reduced in a fixed
 //! order, so results are bit-identical whatever the thread count. Forward, a point carries
 //! `(q, u)` and the sweep sums `K_ij u_j`; backward, it carries `(q, u, a, b = a + w u)` and the
@@ -18,7 +18,9 @@
 //! forward pass: `N·k²/2` stored numbers do not stay in the CPU caches, and moving them through
 //! memory was measured slower than the vectorised exponential, even for k = 100.
 
-use crate::kernel::{F64x4, GaussianKernel, PairSweep, PairTerms, LANES};
+pub mod kernel;
+
+use crate::flow::kernel::{F64x4, GaussianKernel, PairSweep, PairTerms, LANES};
 use crate::{Error, Result, Vec3};
 
 /// Parameters of the flow.

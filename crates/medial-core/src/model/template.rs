@@ -5,8 +5,8 @@
 //! points; atom `m` is landmark `nb + m`. Atom `m` has spokes to `B[m] = (b_0 < b_1 < …)`:
 //! 1 spoke on a free edge, 2 on a sheet interior, 3 on a seam.
 
-use crate::loop_tangent::LoopTangents;
-use crate::topology::{check_closed_oriented_manifold, check_outward};
+use crate::mesh::topology::{check_closed_oriented_manifold, check_outward};
+use crate::model::loop_tangent::LoopTangents;
 use crate::{Error, Result, TriMesh, Vec3};
 use std::collections::HashSet;
 
@@ -218,31 +218,9 @@ fn medial_triangles(triangles: &[[usize; 3]], medial_index: &[usize]) -> Vec<[us
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
-
-    /// A flat hexagonal medial sheet of radius 1 at z = 0 with a centre atom (two spokes, ±z at
-    /// distance `r`) and six rim atoms (one spoke each, radially outward at distance `r`).
-    /// Boundary: a hexagonal bipyramid, 8 points, 12 triangles.
-    pub(crate) fn bipyramid(r: f64) -> MedialTemplate {
-        let rim = |i: usize| {
-            let a = std::f64::consts::TAU * i as f64 / 6.0;
-            Vec3::new(a.cos(), a.sin(), 0.0)
-        };
-        let mut boundary = vec![Vec3::new(0.0, 0.0, r), Vec3::new(0.0, 0.0, -r)];
-        boundary.extend((0..6).map(|i| rim(i) * (1.0 + r)));
-        let mut triangles = Vec::new();
-        for i in 0..6 {
-            let (a, b) = (2 + i, 2 + (i + 1) % 6);
-            triangles.push([0, a, b]);
-            triangles.push([1, b, a]);
-        }
-        let mut medial = vec![Vec3::zeros()];
-        medial.extend((0..6).map(rim));
-        let index = vec![0, 0, 1, 2, 3, 4, 5, 6];
-        let mesh = TriMesh::new(boundary, triangles).expect("valid mesh");
-        MedialTemplate::new(mesh, index, medial).expect("valid template")
-    }
+    use crate::testing::meshes::bipyramid;
 
     fn template_error(mesh: TriMesh, index: Vec<usize>, medial: Vec<Vec3>) -> String {
         MedialTemplate::new(mesh, index, medial)

@@ -6,7 +6,7 @@
 //! spoke or a degenerate normal gives a NaN angle, an atom of zero mean spoke length a NaN
 //! mismatch, and the maxima and means are NaN whenever one of their terms is.
 
-use crate::template::MedialTemplate;
+use crate::model::template::MedialTemplate;
 use crate::Vec3;
 
 /// Spoke metrics of one landmark configuration.
@@ -98,7 +98,7 @@ fn nan_max(values: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::template::tests::bipyramid;
+    use crate::testing::meshes::bipyramid;
     use approx::assert_relative_eq;
 
     #[test]

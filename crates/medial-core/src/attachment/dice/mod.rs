@@ -49,7 +49,7 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
-use crate::volume::Volume;
+use crate::image::volume::Volume;
 use crate::{Error, Result, Vec3};
 
 /// Triangles per parallel work item (fixed, so that sums do not depend on the thread count).

@@ -26,9 +26,9 @@
 //! at a feasible point, when no step is accepted, or after `max_iterations`. The result must
 //! then meet the tolerances of [`ProjectOptions`], otherwise the projection is an error.
 
-use crate::constraints::MedialConstraints;
-use crate::metrics::SpokeMetrics;
-use crate::template::MedialTemplate;
+use crate::model::constraints::MedialConstraints;
+use crate::model::metrics::SpokeMetrics;
+use crate::model::template::MedialTemplate;
 use crate::{Error, Result, Vec3};
 use sprs::CsMat;
 
@@ -377,7 +377,7 @@ fn unflatten(q: &[f64]) -> Vec<Vec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::template::tests::bipyramid;
+    use crate::testing::meshes::bipyramid;
     use approx::assert_relative_eq;
     use nalgebra::DMatrix;
 

@@ -21,7 +21,7 @@ pub trait ConstraintSet: Sync {
     fn accumulate_gradient(&self, q: &[Vec3], weights: &[f64], grad: &mut [Vec3]);
 }
 
-impl ConstraintSet for crate::constraints::MedialConstraints {
+impl ConstraintSet for crate::model::constraints::MedialConstraints {
     fn len(&self) -> usize {
         self.len()
     }

@@ -7,9 +7,9 @@
 //! when `μ` runs away.
 
 use crate::attachment::Attachment;
+use crate::fit::objective::{ConstraintSet, Evaluation, Objective, Penalty};
+use crate::fit::optimize::{minimize, IterationReport, LbfgsOptions, StopReason};
 use crate::flow::Flow;
-use crate::objective::{ConstraintSet, Evaluation, Objective, Penalty};
-use crate::optimize::{minimize, IterationReport, LbfgsOptions, StopReason};
 use crate::{Error, Result, Vec3};
 
 /// When `μ` grows between AL iterations.

@@ -7,7 +7,7 @@
 //! - `max_iterations` iterations done,
 //! - the line search finds no decrease (the best point so far is kept).
 
-use crate::objective::{Evaluation, Objective};
+use crate::fit::objective::{Evaluation, Objective};
 use crate::{Error, Result};
 use argmin::core::{CostFunction, Gradient, IterState, Problem, Solver, State, TerminationStatus};
 use argmin::solver::linesearch::MoreThuenteLineSearch;

@@ -1,7 +1,7 @@
 //! Loop tangent operators of a closed boundary mesh (SPEC §4).
 //!
 //! For a vertex `b` of valence `n` with one-ring `v_0 … v_{n−1}` walked counter-clockwise about
-//! the outward normal from its smallest neighbour ([`crate::topology::vertex_rings`]):
+//! the outward normal from its smallest neighbour ([`crate::mesh::topology::vertex_rings`]):
 //!
 //! ```text
 //! (W¹q)_b = Σ_j cos(2πj/n) q_{v_j},   (W²q)_b = Σ_j sin(2πj/n) q_{v_j},
@@ -12,7 +12,7 @@
 //! counter-clockwise about the outward normal, `n̂_b` points outward. Border vertices of open
 //! meshes would need Loop's border rule; medial templates are closed, so open meshes are refused.
 
-use crate::topology::vertex_rings;
+use crate::mesh::topology::vertex_rings;
 use crate::{Error, Result, Vec3};
 use sprs::{CsMat, TriMat};
 
@@ -168,7 +168,7 @@ fn sparse_rows(n: usize, offsets: &[usize], columns: &[usize], values: &[f64]) -
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_meshes::octahedron;
+    use crate::testing::meshes::octahedron;
     use approx::assert_relative_eq;
 
     #[test]

@@ -15,7 +15,7 @@
 //!
 //! A case is built as a template would be from a real sheet: the coarse sheet is Loop
 //! subdivided once, inflated and projected onto the medial constraints
-//! ([`crate::project::project`]). The target is the template boundary, midpoint subdivided
+//! ([`crate::build::project::project`]). The target is the template boundary, midpoint subdivided
 //! [`TARGET_SUBDIVISIONS`] times (so that the smooth warp bends its triangles), carried by the
 //! case's [`Warp`]: a twist and a bend about the shape's long axis (z) followed by an affine map.
 //!
@@ -24,11 +24,11 @@
 //! and [`target_boundary`], [`target_surface`] and [`target_image`] the targets.
 //! [`parameter_grid`] triangulates the parameter rectangle of a new analytic sheet.
 
-use crate::inflate::{inflate, MedialSheet};
-use crate::project::{project, ProjectOptions, Projection};
-use crate::rasterize::{grid_around, rasterize};
-use crate::template::MedialTemplate;
-use crate::volume::Volume;
+use crate::build::inflate::{inflate, MedialSheet};
+use crate::build::project::{project, ProjectOptions, Projection};
+use crate::image::rasterize::{grid_around, rasterize};
+use crate::image::volume::Volume;
+use crate::model::template::MedialTemplate;
 use crate::{Error, Result, TriMesh, Vec3};
 use nalgebra::{Matrix3, Matrix4, Rotation3, Unit};
 use std::collections::HashMap;

@@ -1,4 +1,6 @@
-//! Basic geometric types shared by the whole engine.
+//! Triangle meshes: the point type, [`TriMesh`], and their topology ([`topology`]).
+
+pub mod topology;
 
 use crate::{Error, Result};
 
@@ -7,7 +9,7 @@ pub type Vec3 = nalgebra::Vector3<f64>;
 
 /// A triangle mesh: points and triangles with indices checked to be in range and distinct,
 /// coordinates checked to be finite. Topology (closed, manifold, oriented) is checked by
-/// [`crate::topology`] where a model needs it.
+/// [`crate::mesh::topology`] where a model needs it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TriMesh {
     points: Vec<Vec3>,

@@ -23,8 +23,8 @@
 //! the penalty weighs every spoke alike and μ is dimensionless. Measured on cmrep's t001 bent
 //! by a known map (SSD, 4 AL iterations × 1000): 0.14° and 0.18 % against 0.53° and 1.11 %.
 
-use crate::loop_tangent::LoopTangents;
-use crate::template::MedialTemplate;
+use crate::model::loop_tangent::LoopTangents;
+use crate::model::template::MedialTemplate;
 use crate::{Error, Result, Vec3};
 use sprs::{CsMat, TriMat};
 
@@ -278,7 +278,7 @@ impl MedialConstraints {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::template::tests::bipyramid;
+    use crate::testing::meshes::bipyramid;
     use approx::assert_relative_eq;
 
     #[test]

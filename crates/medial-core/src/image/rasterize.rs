@@ -15,7 +15,7 @@ use std::collections::HashMap;
 use nalgebra::Matrix4;
 use rayon::prelude::*;
 
-use crate::volume::Volume;
+use crate::image::volume::Volume;
 use crate::{Error, Result, TriMesh, Vec3};
 
 /// Rasterizes the closed mesh `mesh` on the grid `dims`, `voxel_to_world`: 1 at voxel centres
@@ -350,12 +350,11 @@ impl Expansion {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::test_meshes;
     use nalgebra::Vector4;
 
-    /// The octahedron of [`test_meshes::octahedron`] scaled by r ("radius") and centred at c.
+    /// The octahedron of [`crate::testing::meshes::octahedron`] scaled by r and centred at c.
     fn octahedron(c: Vec3, r: f64) -> TriMesh {
-        let (points, triangles) = test_meshes::octahedron();
+        let (points, triangles) = crate::testing::meshes::octahedron();
         TriMesh::new(points.iter().map(|p| c + r * p).collect(), triangles).unwrap()
     }
 

@@ -1,0 +1,14 @@
+//! The medial model (SPEC §2–§4, §6): a cmrep template of boundary points with spokes to
+//! medial atoms ([`template`]), the Loop tangents of its boundary ([`loop_tangent`]), the medial
+//! constraints that keep it medial under a flow ([`constraints`]), and how well a configuration
+//! of its landmarks satisfies them ([`metrics`]).
+
+pub mod constraints;
+pub mod loop_tangent;
+pub mod metrics;
+pub mod template;
+
+pub use constraints::{ConstraintUnits, MedialConstraints};
+pub use loop_tangent::LoopTangents;
+pub use metrics::SpokeMetrics;
+pub use template::MedialTemplate;
