@@ -2,11 +2,11 @@
 //! relative paths are relative to the config file.
 
 use crate::error::CliError;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
 /// A whole config file.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Config {
     /// `[model]`.
@@ -23,7 +23,7 @@ pub struct Config {
 }
 
 /// `[model]`.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelConfig {
     /// The template: a cmrep medial template, or a plain triangle mesh or point set (VTK).
@@ -31,7 +31,7 @@ pub struct ModelConfig {
 }
 
 /// `[flow]`.
-#[derive(Clone, Copy, Debug, Deserialize)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FlowConfig {
     /// Kernel width σ, in the unit of the coordinates (mm).
@@ -53,7 +53,7 @@ impl Default for FlowConfig {
 }
 
 /// `[output]`.
-#[derive(Clone, Copy, Debug, Deserialize)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct OutputConfig {
     /// Write the model at every time point under `flow/` (else only the first and last).
@@ -72,7 +72,7 @@ impl Default for OutputConfig {
 }
 
 /// The data term of a stage.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum AttachmentKind {
     /// Sum of squared distances to corresponding points.
@@ -92,7 +92,7 @@ impl AttachmentKind {
 }
 
 /// When μ grows between augmented-Lagrangian iterations.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum MuUpdateConfig {
     /// After every AL iteration.
@@ -103,7 +103,7 @@ pub enum MuUpdateConfig {
 }
 
 /// The unit of the medial constraints (see `medial_core::model::constraints::ConstraintUnits`).
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq, Eq, Default)]
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum ConstraintUnitsConfig {
     /// mm², as SPEC §3 and the reference implementation (the paper's μ values carry over).
@@ -114,7 +114,7 @@ pub enum ConstraintUnitsConfig {
 }
 
 /// `[[stage]]`.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct StageConfig {
     /// Name used in logs and outputs.
@@ -122,15 +122,20 @@ pub struct StageConfig {
     /// `"ssd"` or `"dice"`.
     pub attachment: AttachmentKind,
     /// SSD: a mesh with the same points, in the same order, as the template boundary.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub target: Option<PathBuf>,
     /// SSD: a 4×4 affine matrix (text, row by row); the targets are the template's boundary
     /// points moved by it.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub transform: Option<PathBuf>,
     /// Dice: a binary (or labelled) image.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub image: Option<PathBuf>,
     /// Dice: the foreground label (default: every voxel > 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub label: Option<f64>,
     /// Weight of the data term (default 1 for SSD, 100 for Dice).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub weight: Option<f64>,
     /// Dice: Gaussian smoothing of the image, mm.
     #[serde(default = "defaults::image_sigma")]
@@ -142,6 +147,7 @@ pub struct StageConfig {
     #[serde(default = "defaults::layers")]
     pub layers: usize,
     /// Medial constraints (default: on for medial templates).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub constraints: Option<bool>,
     /// Initial penalty weight μ.
     #[serde(default = "defaults::mu")]
@@ -212,6 +218,34 @@ mod defaults {
 }
 
 impl StageConfig {
+    /// A stage named `name` with `attachment` and every other setting at its default (no
+    /// target, transform or image yet).
+    pub fn new(name: &str, attachment: AttachmentKind) -> Self {
+        Self {
+            name: name.into(),
+            attachment,
+            target: None,
+            transform: None,
+            image: None,
+            label: None,
+            weight: None,
+            image_sigma: defaults::image_sigma(),
+            subdivision: defaults::subdivision(),
+            layers: defaults::layers(),
+            constraints: None,
+            mu: defaults::mu(),
+            mu_factor: defaults::mu_factor(),
+            mu_max: defaults::mu_max(),
+            mu_update: MuUpdateConfig::default(),
+            constraint_units: ConstraintUnitsConfig::default(),
+            al_iterations: defaults::al_iterations(),
+            max_iterations: defaults::max_iterations(),
+            gradient_tolerance: defaults::gradient_tolerance(),
+            relative_decrease: defaults::relative_decrease(),
+            lbfgs_memory: defaults::lbfgs_memory(),
+        }
+    }
+
     /// The data weight, with the default of the attachment.
     pub fn data_weight(&self) -> f64 {
         self.weight.unwrap_or(match self.attachment {
@@ -267,6 +301,13 @@ impl Config {
             s.check().map_err(|e| format!("stage '{}': {e}", s.name))?;
         }
         Ok(())
+    }
+
+    /// The config as TOML text after the comment lines `header`, every setting written out (paths
+    /// as they are held: relative paths stay relative to the file's folder).
+    pub fn to_toml(&self, header: &str) -> Result<String, CliError> {
+        let body = toml::to_string(self).map_err(|e| CliError::Input(format!("config: {e}")))?;
+        Ok(format!("{header}\n{body}"))
     }
 
     /// The stage called `name`.

@@ -1,24 +1,41 @@
-//! Turns a `[[stage]]` of the config into what the engine runs: the attachment, whether the
-//! medial constraints apply, the μ schedule and the L-BFGS options.
+//! Turns a config into what the engine runs: the flow, and for each `[[stage]]` the attachment,
+//! whether the medial constraints apply, the μ schedule and the L-BFGS options; and the figures
+//! reported for a configuration of the model's landmarks.
 
-use crate::config::{AttachmentKind, ConstraintUnitsConfig, MuUpdateConfig, StageConfig};
+use crate::config::{AttachmentKind, Config, ConstraintUnitsConfig, MuUpdateConfig, StageConfig};
 use crate::error::CliError;
-use crate::model::Model;
+use crate::summary::Figures;
 use medial_core::attachment::dice::{DiceAttachment, DiceParams};
 use medial_core::attachment::ssd::Ssd;
 use medial_core::attachment::Attachment;
 use medial_core::fit::augmented_lagrangian::{AlSchedule, MuUpdate};
+use medial_core::fit::objective::Evaluation;
 use medial_core::fit::optimize::LbfgsOptions;
+use medial_core::flow::{Flow, FlowParams};
 use medial_core::image::rasterize::voxel_dice;
 use medial_core::image::volume::Volume;
 use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
+use medial_core::model::Model;
 use medial_core::{TriMesh, Vec3};
 use std::path::Path;
+
+/// The flow of a config for `landmarks` points.
+pub fn flow_of(config: &Config, landmarks: usize) -> Result<Flow, CliError> {
+    let f = &config.flow;
+    let params = FlowParams {
+        sigma: f.sigma,
+        time_steps: f.time_steps,
+        kinetic_weight: f.kinetic_weight,
+    };
+    Ok(Flow::new(params, landmarks)?)
+}
 
 /// A stage ready to run.
 pub struct Prepared {
     /// The data term.
     pub attachment: Box<dyn Attachment>,
+    /// Its weight `w_data`.
+    pub data_weight: f64,
     /// SSD targets, to report the mean distance.
     pub ssd: Option<Ssd>,
     /// Dice stages: the binary foreground of the image (before smoothing), to report the voxel
@@ -45,6 +62,26 @@ impl Prepared {
         )?;
         Ok(Some(voxel_dice(&boundary, mask)?))
     }
+
+    /// The reported figures of an evaluation whose flow ends at `q`.
+    pub fn figures_at(&self, model: &Model, e: &Evaluation, q: &[Vec3]) -> Figures {
+        let metrics = model.metrics(q);
+        Figures::new(
+            e,
+            metrics.as_ref(),
+            self.ssd.as_ref().map(|s| s.mean_distance(q)),
+        )
+    }
+
+    /// The figures at the end of a stage: [`Prepared::figures_at`] the end of the flow, with
+    /// the voxel overlap of Dice stages.
+    pub fn end_figures(&self, model: &Model, e: &Evaluation) -> Result<Figures, CliError> {
+        let q = &e.final_positions;
+        Ok(Figures {
+            voxel_dice: self.voxel_dice(model, q)?,
+            ..self.figures_at(model, e, q)
+        })
+    }
 }
 
 /// Prepares `stage` for `model`.
@@ -68,6 +105,7 @@ pub fn prepare(stage: &StageConfig, model: &Model) -> Result<Prepared, CliError>
     };
     Ok(Prepared {
         attachment,
+        data_weight: stage.data_weight(),
         ssd,
         mask,
         constraints: constraints(stage, model, constrained)?,

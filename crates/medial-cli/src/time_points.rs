@@ -3,8 +3,8 @@
 //! over the flow for `summary.json`. Medial templates only: a plain mesh has no spokes.
 
 use crate::error::CliError;
-use crate::model::Model;
 use medial_core::flow::Trajectory;
+use medial_core::model::{MedialConstraints, Model};
 use serde::Serialize;
 use std::path::Path;
 
@@ -42,9 +42,10 @@ pub struct OverTime {
 
 /// The figures at every time point of `trajectory`; empty for a plain mesh.
 pub fn time_points(model: &Model, trajectory: &Trajectory) -> Vec<TimePoint> {
-    let Some(constraints) = model.constraints() else {
+    let Some(template) = model.medial() else {
         return Vec::new();
     };
+    let constraints = MedialConstraints::new(template);
     let last = trajectory.time_points() - 1;
     let mut values = vec![0.0; constraints.len()];
     (0..=last)

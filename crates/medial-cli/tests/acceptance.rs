@@ -1,5 +1,5 @@
 //! The acceptance fits of the medial and Dice issues on cmrep's real t001 template, through the
-//! binary: `medial warp` makes a case with a known strongly bending map, then `medial fit`
+//! binary: `medial synth --from` makes a case with a known strongly bending map, then `medial fit`
 //! runs its two configs. Each fit takes one to two minutes on 2 cores, so these tests are
 //! ignored by default; run them with
 //! `cargo test --release -p medial-cli --test acceptance -- --ignored --nocapture`.
@@ -10,10 +10,10 @@ use common::{data, f, run_json, s};
 use serde_json::Value;
 use std::path::Path;
 
-/// `medial warp` of t001 with the default bend (25°) and twist (10°) into `out`.
+/// `medial synth --from` of t001 with the default bend (25°) and twist (10°) into `out`.
 fn warp_t001(out: &Path) {
     let template = data("cmrep/t001_template_bcmrep.vtk");
-    let summary = run_json(&["warp", s(&template), "--out", s(out)]);
+    let summary = run_json(&["synth", "--from", s(&template), "--out", s(out)]);
     println!(
         "warp: boundary points moved by {:.2} mm on average, {:.2} mm beyond the affine part",
         f(&summary["displacement_mean_mm"]),

@@ -1,7 +1,7 @@
 //! End-to-end tests of the template commands through the built binary: `medial inflate` and
 //! `medial project` on the real placenta sheet (against cmrep's own 818-point inflation),
 //! `medial synth` for both cases (checked by `medial eval` on the written fit.toml),
-//! `medial warp` on cmrep's t001 template, `medial rasterize`, and how bad input is refused.
+//! `medial synth --from` on cmrep's t001 template, `medial rasterize`, and how bad input is refused.
 
 mod common;
 
@@ -153,7 +153,7 @@ fn synthetic_cases_are_complete_and_their_configs_load() {
     }
 }
 
-/// A 4×4 matrix written as `medial warp` and SSD stages read it (row by row).
+/// A 4×4 matrix written as `medial synth --from` and SSD stages read it (row by row).
 fn write_matrix(path: &Path, m: [[f64; 4]; 4]) {
     let text: String = m
         .iter()
@@ -180,8 +180,8 @@ fn warp_turns_the_t001_template_into_a_case() {
         env!("CARGO_MANIFEST_DIR"),
         "/../../../shared/data/cmrep/t001_template_bcmrep.vtk"
     );
-    let summary = run_json(&["warp", template_path, "--out", s(&out)]);
-    println!("medial warp t001: {summary:#}");
+    let summary = run_json(&["synth", "--from", template_path, "--out", s(&out)]);
+    println!("medial synth --from t001: {summary:#}");
     for file in [
         "template.vtk",
         "target_boundary.vtk",
@@ -274,7 +274,8 @@ fn warp_takes_an_affine_file_and_refuses_bad_input() {
     );
     let (shifted, shift_file) = (path("shifted"), path("shift.txt"));
     let args = [
-        "warp",
+        "synth",
+        "--from",
         s(&template),
         "--out",
         s(&shifted),
@@ -303,19 +304,20 @@ fn warp_takes_an_affine_file_and_refuses_bad_input() {
     };
     let bad = path("bad");
     let out = s(&bad);
-    // `medial warp` of t001 with further `options`.
+    // `medial synth --from` of t001 with further `options`.
     let t001_fails = |options: &[&str], needles: &[&str]| {
-        let mut args = vec!["warp", s(&template), "--out", out];
+        let mut args = vec!["synth", "--from", s(&template), "--out", out];
         args.extend(options);
         fails(&args, needles);
     };
     fails(
-        &["warp", "/nonexistent/t.vtk", "--out", out],
+        &["synth", "--from", "/nonexistent/t.vtk", "--out", out],
         &["/nonexistent/t.vtk"],
     );
     fails(
         &[
-            "warp",
+            "synth",
+            "--from",
             s(&data("cmrep/placenta_template_anterioralign3.vtk")),
             "--out",
             out,
@@ -344,7 +346,8 @@ fn warp_takes_an_affine_file_and_refuses_bad_input() {
     run_json(&["synth", "cup", "--out", s(&path("cup")), "--spacing", "1"]);
     fails(
         &[
-            "warp",
+            "synth",
+            "--from",
             s(&path("cup/template.vtk")),
             "--out",
             out,

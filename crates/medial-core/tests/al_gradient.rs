@@ -59,7 +59,7 @@ fn check(units: ConstraintUnits) {
             lambda: &lambda,
         })
         .unwrap();
-    let u: Vec<f64> = (0..flow.control_len())
+    let u: Vec<f64> = (0..flow.momenta_len())
         .map(|_| rng.gen_range(-0.5..0.5))
         .collect();
     let mut grad = vec![0.0; u.len()];

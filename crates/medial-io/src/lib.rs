@@ -10,8 +10,10 @@ pub mod cmrep;
 pub mod error;
 pub mod exr_volume;
 pub mod mesh;
+pub mod model;
 pub mod nifti_volume;
 pub mod npy;
+pub mod sheet;
 pub mod vtk;
 
 pub use error::{Error, Result};

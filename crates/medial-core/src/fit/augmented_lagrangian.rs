@@ -1,6 +1,6 @@
 //! The augmented-Lagrangian schedule of one stage (SPEC §3).
 //!
-//! `λ = 0`, `μ = μ₀`; for each AL iteration: minimise `E_AL` over all controls (L-BFGS, warm
+//! `λ = 0`, `μ = μ₀`; for each AL iteration: minimise `E_AL` over all momenta (L-BFGS, warm
 //! started), then `λ^n_l ← λ^n_l − μ C_l(q^n)` at the optimum, then `μ ← μ·μ_factor` (always,
 //! or only when `max |C|` did not halve since the previous AL iteration). `μ` never exceeds
 //! [`AlSchedule::mu_max`], a guard against the divergence the reference implementation shows
@@ -67,13 +67,13 @@ impl AlSchedule {
     }
 }
 
-/// One stage: flow, template, attachment and its weight, optional constraints.
+/// One stage: flow, initial landmarks, attachment and its weight, optional constraints.
 #[derive(Clone, Copy)]
 pub struct Stage<'a> {
     /// The flow.
     pub flow: &'a Flow,
-    /// `q^0`.
-    pub template: &'a [Vec3],
+    /// The landmarks at `t = 0`, `q^0` (boundary points, then medial points).
+    pub initial: &'a [Vec3],
     /// `g`.
     pub attachment: &'a dyn Attachment,
     /// `w_data`.
@@ -96,8 +96,8 @@ pub struct Progress<'r> {
 /// The outcome of a stage.
 #[derive(Clone, Debug)]
 pub struct StageOutcome {
-    /// Final controls.
-    pub controls: Vec<f64>,
+    /// Final momenta.
+    pub momenta: Vec<f64>,
     /// Figures of the last minimisation at its optimum.
     pub evaluation: Evaluation,
     /// L-BFGS iterations over all AL iterations.
@@ -112,7 +112,7 @@ pub struct StageOutcome {
     pub stops: Vec<StopReason>,
 }
 
-/// Runs a stage from the controls `start`: one minimisation without constraints, the AL
+/// Runs a stage from the momenta `start`: one minimisation without constraints, the AL
 /// schedule with them.
 pub fn run_stage(
     stage: &Stage<'_>,
@@ -124,7 +124,7 @@ pub fn run_stage(
     let Some(constraints) = stage.constraints else {
         let objective = Objective::new(
             stage.flow,
-            stage.template,
+            stage.initial,
             stage.attachment,
             stage.data_weight,
         );
@@ -136,7 +136,7 @@ pub fn run_stage(
             })
         })?;
         return Ok(StageOutcome {
-            controls: min.controls,
+            momenta: min.momenta,
             evaluation: min.evaluation,
             iterations: min.iterations,
             evaluations: min.evaluations,
@@ -148,9 +148,9 @@ pub fn run_stage(
     schedule.check()?;
     let mut lambda = vec![0.0; stage.flow.time_steps() * constraints.len()];
     let mut mu = schedule.mu;
-    let mut controls = start;
+    let mut momenta = start;
     let mut outcome = StageOutcome {
-        controls: Vec::new(),
+        momenta: Vec::new(),
         evaluation: Evaluation::default(),
         iterations: 0,
         evaluations: 0,
@@ -162,7 +162,7 @@ pub fn run_stage(
     for al_iteration in 0..schedule.iterations {
         let objective = Objective::new(
             stage.flow,
-            stage.template,
+            stage.initial,
             stage.attachment,
             stage.data_weight,
         )
@@ -171,14 +171,14 @@ pub fn run_stage(
             mu,
             lambda: &lambda,
         })?;
-        let min = minimize(&objective, controls, options, |r| {
+        let min = minimize(&objective, momenta, options, |r| {
             progress(&Progress {
                 al_iteration,
                 mu,
                 report: r,
             })
         })?;
-        let values = objective.constraint_values(&min.controls)?;
+        let values = objective.constraint_values(&min.momenta)?;
         lambda
             .iter_mut()
             .zip(&values)
@@ -194,12 +194,12 @@ pub fn run_stage(
         outcome.al_iterations += 1;
         outcome.evaluation = min.evaluation.clone();
         outcome.stops.push(min.stop);
-        controls = min.controls;
+        momenta = min.momenta;
         if grow {
             mu = (mu * schedule.mu_factor).min(schedule.mu_max);
         }
     }
-    outcome.controls = controls;
+    outcome.momenta = momenta;
     outcome.mu = mu;
     Ok(outcome)
 }

@@ -1,11 +1,13 @@
 //! Fitting: the objective of one stage and its exact gradient ([`objective`]), its minimisation
-//! with L-BFGS ([`optimize`]), and the augmented-Lagrangian schedule of a stage
-//! ([`augmented_lagrangian`]).
+//! with L-BFGS ([`optimize`]), the augmented-Lagrangian schedule of a stage
+//! ([`augmented_lagrangian`]), and a whole fit of several stages in a row ([`stages`]).
 
 pub mod augmented_lagrangian;
 pub mod objective;
 pub mod optimize;
+pub mod stages;
 
-pub use augmented_lagrangian::{run_stage, AlSchedule, MuUpdate, Stage, StageOutcome};
+pub use augmented_lagrangian::{run_stage, AlSchedule, MuUpdate, Progress, Stage, StageOutcome};
 pub use objective::{ConstraintSet, Evaluation, Objective, Penalty};
 pub use optimize::{minimize, LbfgsOptions, StopReason};
+pub use stages::{run_stages, FitEvent, PlannedStage};

@@ -1,6 +1,6 @@
 //! The objective of one stage (SPEC §3):
 //! `E_AL = w_kin·KE + w_data·g(q^N) + Σ_{n=1..N} Σ_l [ (μ/2) C_l(q^n)² − λ^n_l C_l(q^n) ]`,
-//! its exact gradient with respect to every control `u^n` (one forward and one fused backward
+//! its exact gradient with respect to every momentum `u^n` (one forward and one fused backward
 //! pass), and the figures reported for it.
 
 use crate::attachment::Attachment;
@@ -64,10 +64,10 @@ pub struct Evaluation {
     pub final_positions: Vec<Vec3>,
 }
 
-/// One stage's objective over the controls `u` (flat, `N·k·3`).
+/// One stage's objective over the momenta `u` (flat, `N·k·3`).
 pub struct Objective<'a> {
     flow: &'a Flow,
-    template: &'a [Vec3],
+    initial: &'a [Vec3],
     attachment: &'a dyn Attachment,
     data_weight: f64,
     penalty: Option<Penalty<'a>>,
@@ -77,13 +77,13 @@ impl<'a> Objective<'a> {
     /// `w_kin·KE + w_data·g`, without constraints.
     pub fn new(
         flow: &'a Flow,
-        template: &'a [Vec3],
+        initial: &'a [Vec3],
         attachment: &'a dyn Attachment,
         data_weight: f64,
     ) -> Self {
         Self {
             flow,
-            template,
+            initial,
             attachment,
             data_weight,
             penalty: None,
@@ -109,20 +109,20 @@ impl<'a> Objective<'a> {
         self.flow
     }
 
-    /// The template configuration `q^0`.
-    pub fn template(&self) -> &[Vec3] {
-        self.template
+    /// The landmarks at `t = 0`, `q^0`.
+    pub fn initial(&self) -> &[Vec3] {
+        self.initial
     }
 
     /// Number of unknowns `N·k·3`.
     pub fn dimension(&self) -> usize {
-        self.flow.control_len()
+        self.flow.momenta_len()
     }
 
     /// The value and, if `grad` is given, the exact gradient `∂E_AL/∂u`.
     pub fn evaluate(&self, u: &[f64], grad: Option<&mut [f64]>) -> Result<Evaluation> {
-        let trajectory = self.flow.shoot(self.template, u)?;
-        let k = self.template.len();
+        let trajectory = self.flow.shoot(self.initial, u)?;
+        let k = self.initial.len();
         let q_final = trajectory.final_positions();
         let mut terminal = vec![Vec3::zeros(); k];
         let data = self
@@ -160,10 +160,10 @@ impl<'a> Objective<'a> {
         })
     }
 
-    /// Constraint values at time points `1 … N` under the controls `u` (`N·L` numbers), for
+    /// Constraint values at time points `1 … N` under the momenta `u` (`N·L` numbers), for
     /// the multiplier update; empty without a penalty.
     pub fn constraint_values(&self, u: &[f64]) -> Result<Vec<f64>> {
-        Ok(self.constraint_values_of(&self.flow.shoot(self.template, u)?))
+        Ok(self.constraint_values_of(&self.flow.shoot(self.initial, u)?))
     }
 
     fn constraint_values_of(&self, trajectory: &Trajectory) -> Vec<f64> {

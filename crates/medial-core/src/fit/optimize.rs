@@ -1,4 +1,4 @@
-//! Minimisation of an [`Objective`] over all controls with L-BFGS (argmin, More–Thuente line
+//! Minimisation of an [`Objective`] over all momenta with L-BFGS (argmin, More–Thuente line
 //! search), driven iteration by iteration so that every iteration can be reported.
 //!
 //! Stopping rule, checked after every iteration, first that holds:
@@ -73,15 +73,15 @@ pub struct IterationReport<'a> {
     pub evaluation: &'a Evaluation,
     /// `‖∇E‖` at the current iterate.
     pub gradient_norm: f64,
-    /// The current controls.
-    pub controls: &'a [f64],
+    /// The current momenta.
+    pub momenta: &'a [f64],
 }
 
 /// The outcome of [`minimize`].
 #[derive(Clone, Debug)]
 pub struct Minimum {
-    /// The controls at the last accepted iterate.
-    pub controls: Vec<f64>,
+    /// The momenta at the last accepted iterate.
+    pub momenta: Vec<f64>,
     /// Its figures.
     pub evaluation: Evaluation,
     /// `‖∇E‖` there.
@@ -104,7 +104,7 @@ pub fn minimize(
 ) -> Result<Minimum> {
     if start.len() != objective.dimension() {
         return Err(Error::ShapeMismatch {
-            what: "initial controls".into(),
+            what: "initial momenta".into(),
             expected: objective.dimension(),
             found: start.len(),
         });
@@ -129,7 +129,7 @@ pub fn minimize(
         evaluations: cached.count(),
         evaluation: &first,
         gradient_norm: grad0,
-        controls: state.get_param().map_or(&[], |p| p.as_slice()),
+        momenta: state.get_param().map_or(&[], |p| p.as_slice()),
     });
     let mut iteration = 0;
     let mut previous = first.total;
@@ -167,7 +167,7 @@ pub fn minimize(
             evaluations: cached.count(),
             evaluation: &evaluation,
             gradient_norm,
-            controls: param,
+            momenta: param,
         });
         if gradient_norm <= options.gradient_tolerance * grad0 {
             break StopReason::GradientTolerance;
@@ -178,13 +178,13 @@ pub fn minimize(
         }
         previous = evaluation.total;
     };
-    let controls = state
+    let momenta = state
         .take_param()
         .ok_or_else(|| Error::Optimisation("L-BFGS lost its iterate".into()))?;
-    cached.ensure(&controls)?;
+    cached.ensure(&momenta)?;
     let (evaluation, gradient_norm) = cached.current();
     Ok(Minimum {
-        controls,
+        momenta,
         evaluation,
         gradient_norm,
         iterations: iteration,
@@ -202,7 +202,7 @@ struct Cached<'o, 'a> {
 
 #[derive(Default)]
 struct Last {
-    controls: Vec<f64>,
+    momenta: Vec<f64>,
     evaluation: Evaluation,
     gradient: Vec<f64>,
     count: usize,
@@ -226,14 +226,14 @@ impl<'o, 'a> Cached<'o, 'a> {
     /// Evaluates at `u` unless that is the remembered point.
     fn ensure(&self, u: &[f64]) -> Result<()> {
         let mut last = self.lock();
-        if last.count > 0 && last.controls == u {
+        if last.count > 0 && last.momenta == u {
             return Ok(());
         }
         let mut gradient = vec![0.0; u.len()];
         match self.objective.evaluate(u, Some(&mut gradient)) {
             Ok(evaluation) => {
-                last.controls.clear();
-                last.controls.extend_from_slice(u);
+                last.momenta.clear();
+                last.momenta.extend_from_slice(u);
                 last.evaluation = evaluation;
                 last.gradient = gradient;
                 last.count += 1;

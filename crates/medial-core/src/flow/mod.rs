@@ -1,6 +1,6 @@
 //! The landmark flow (forward Euler) and its exact discrete adjoint (SPEC §3).
 //!
-//! Controls `u^n ∈ R^{k×3}`, `n = 0 … N−1`, are stored flat as `u[(n·k + i)·3 + c]`.
+//! Momenta `u^n ∈ R^{k×3}`, `n = 0 … N−1`, are stored flat as `u[(n·k + i)·3 + c]`.
 //!
 //! - Flow: `q^{n+1}_i = q^n_i + dt Σ_j K^n_ij u^n_j`, `dt = 1/N`.
 //! - Kinetic energy: `KE = (dt/2) Σ_n Σ_ij K^n_ij (u^n_i · u^n_j)`.
@@ -121,18 +121,18 @@ impl Flow {
         self.landmarks
     }
 
-    /// Length of a control vector: `N·k·3`.
-    pub fn control_len(&self) -> usize {
+    /// Length of a momentum vector: `N·k·3`.
+    pub fn momenta_len(&self) -> usize {
         self.steps * self.landmarks * 3
     }
 
-    /// The controls `u^n` within the flat control vector.
+    /// The momenta `u^n` within the flat momentum vector.
     fn step_controls<'u>(&self, u: &'u [f64], n: usize) -> &'u [f64] {
         let k3 = self.landmarks * 3;
         &u[n * k3..(n + 1) * k3]
     }
 
-    /// Checks the sizes of a template and a control vector.
+    /// Checks the sizes of a template and a momentum vector.
     pub fn check_sizes(&self, q0: &[Vec3], u: &[f64]) -> Result<()> {
         if q0.len() != self.landmarks {
             return Err(Error::ShapeMismatch {
@@ -141,17 +141,17 @@ impl Flow {
                 found: q0.len(),
             });
         }
-        if u.len() != self.control_len() {
+        if u.len() != self.momenta_len() {
             return Err(Error::ShapeMismatch {
-                what: "controls (N·k·3 numbers)".into(),
-                expected: self.control_len(),
+                what: "momenta (N·k·3 numbers)".into(),
+                expected: self.momenta_len(),
                 found: u.len(),
             });
         }
         Ok(())
     }
 
-    /// The forward pass from the template `q0` under the controls `u`.
+    /// The forward pass from the template `q0` under the momenta `u`.
     pub fn shoot(&self, q0: &[Vec3], u: &[f64]) -> Result<Trajectory> {
         self.check_sizes(q0, u)?;
         // On a worker thread of the pool, each step's parallel sweep starts without handing the
@@ -255,7 +255,7 @@ impl Flow {
         }
     }
 
-    /// One backward step at the positions `q = q^n` with the controls `u = u^n`: from
+    /// One backward step at the positions `q = q^n` with the momenta `u = u^n`: from
     /// `a^{n+1}` (in `adjoint`), writes `∂E/∂u^n` to `grad` and leaves `a^n` without `∇Φ^n` in
     /// `adjoint`.
     fn adjoint_step(

@@ -1,13 +1,20 @@
 //! `medial synth`: writes a self-contained synthetic case into a folder: the template, a target
 //! segmentation (the template's shape carried by a known diffeomorphism, rasterized), the
-//! affine part of that diffeomorphism and a ready `fit.toml` in the style of the paper (an SSD
+//! affine part of that diffeomorphism and ready configs in the style of the paper (an SSD
 //! initialisation by the affine map, then Dice with μ rising over six AL iterations).
 //!
-//! [`CaseFiles`] (the files of a case) and [`FitPlan`] (its configs) are shared with
-//! `medial warp`, which makes the same kind of case from any template.
+//! The template is a built-in analytic shape (`medial synth cup|toy`, this module) or any cmrep
+//! template (`medial synth --from TEMPLATE.vtk`, [`from_template`]); [`CaseFiles`] (the files
+//! of a case) and [`FitPlan`] (its configs) serve both.
 
+mod from_template;
+
+use crate::config::{
+    AttachmentKind, Config, ConstraintUnitsConfig, FlowConfig, ModelConfig, OutputConfig,
+    StageConfig,
+};
 use crate::error::CliError;
-use crate::inflate_cmd::{print_json, write_options, TemplateSummary};
+use crate::output::{print_json, write_options, write_text, TemplateSummary};
 use medial_core::image::volume::Volume;
 use medial_core::model::template::MedialTemplate;
 use medial_core::synth::{Shape, SyntheticCase};
@@ -18,13 +25,23 @@ use nalgebra::Matrix4;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
-/// Write a synthetic case (template, target image, fit.toml).
+/// Write a synthetic case (template, target image, affine part, configs).
 #[derive(clap::Args, Debug)]
 pub struct SynthArgs {
-    /// The case: `cup` (an LV-like curved sheet of varying thickness with a free edge) or `toy`
-    /// (the paper's toy: three sheets meeting along one seam).
-    #[arg(value_name = "NAME")]
-    pub name: String,
+    /// A built-in shape: `cup` (an LV-like curved sheet of varying thickness with a free edge)
+    /// or `toy` (the paper's toy: three sheets meeting along one seam).
+    #[arg(
+        value_name = "SHAPE",
+        required_unless_present = "from",
+        conflicts_with = "from"
+    )]
+    pub shape: Option<String>,
+    /// Make the case from this cmrep template instead (legacy VTK polydata with a MedialIndex
+    /// point array; coordinates in mm): a twist + bend of its long principal axis, then an
+    /// affine map; writes fit_boundary.toml (constrained SSD to the warped points) beside
+    /// fit.toml.
+    #[arg(long, value_name = "TEMPLATE.vtk")]
+    pub from: Option<PathBuf>,
     /// Folder to write into (created if needed; files of the same names are replaced).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -34,6 +51,8 @@ pub struct SynthArgs {
     /// Margin between the target and the border of its image, mm.
     #[arg(long, value_name = "MM", default_value_t = 3.0)]
     pub margin: f64,
+    #[command(flatten)]
+    pub warp: from_template::WarpArgs,
 }
 
 /// The fit settings of the built-in shapes (σ about their half thickness).
@@ -67,10 +86,19 @@ struct SynthSummary {
     target_volume_mm3: f64,
 }
 
-/// Builds the case and writes `template.vtk`, `target.nii.gz`, `target_boundary.vtk`,
-/// `affine.txt` and `fit.toml` into the folder; prints a summary.
+/// Writes the case of a built-in shape or, with `--from`, of a template.
 pub fn run(args: &SynthArgs) -> Result<(), CliError> {
-    let shape = Shape::from_name(&args.name).map_err(|e| CliError::Input(e.to_string()))?;
+    match (&args.shape, &args.from) {
+        (_, Some(template)) => from_template::run(args, template),
+        (Some(name), None) => run_shape(args, name),
+        (None, None) => unreachable!("clap requires a shape or --from"),
+    }
+}
+
+/// Builds the case of a built-in shape and writes `template.vtk`, `target.nii.gz`,
+/// `target_boundary.vtk`, `affine.txt` and `fit.toml` into the folder; prints a summary.
+fn run_shape(args: &SynthArgs, name: &str) -> Result<(), CliError> {
+    let shape = Shape::from_name(name).map_err(|e| CliError::Input(e.to_string()))?;
     let spacing = args.spacing.unwrap_or_else(|| shape.image_spacing_mm());
     let case = SyntheticCase::build(shape)?;
     let image = case.target_image(spacing, args.margin)?;
@@ -89,7 +117,12 @@ pub fn run(args: &SynthArgs) -> Result<(), CliError> {
         target_boundary: &case.target_boundary()?,
         image: &image,
         affine: case.warp.affine(),
-        configs: &[("fit.toml", plan(shape).paper_schedule(&header))],
+        configs: &[(
+            "fit.toml",
+            plan(shape)
+                .paper_schedule()
+                .to_toml(&format!("{header}{PAPER_SCHEDULE_NOTE}"))?,
+        )],
     }
     .write(&args.out)?;
     print_json(&SynthSummary {
@@ -104,7 +137,7 @@ pub fn run(args: &SynthArgs) -> Result<(), CliError> {
     })
 }
 
-/// The files of a synthetic case, as `medial synth` and `medial warp` write them.
+/// The files of a synthetic case, as `medial synth` writes them.
 pub struct CaseFiles<'a> {
     /// Written as `template.vtk` (cmrep template, ASCII).
     pub template: &'a MedialTemplate,
@@ -175,7 +208,7 @@ const BOUNDARY_AL_ITERATIONS: usize = 4;
 
 /// AL iterations of the Dice stage (μ = 0.02, 0.2, …, 2000 in relative constraint units; on
 /// cmrep's t001 about the weight of the paper's μ = 0.001 … 100 in mm², one step further than
-/// the paper's 10). Measured on t001 bent by `medial warp`: 0.24° and 0.36 %, against 0.57° and
+/// the paper's 10). Measured on t001 bent by `medial synth --from`: 0.24° and 0.36 %, against 0.57° and
 /// 1.59 % with the same schedule in mm² and 2.6 % when stopping at μ = 10.
 const DICE_AL_ITERATIONS: usize = 6;
 
@@ -183,95 +216,61 @@ impl FitPlan {
     /// The paper's schedule (`fit.toml`): SSD towards the affine part `affine.txt` (μ = 1, one
     /// AL iteration), then Dice against `target.nii.gz` with the constraints in relative units
     /// and μ = 0.02, 0.2, …, 2000 ([`DICE_AL_ITERATIONS`]).
-    /// `header` (TOML comment lines) explains the case.
-    pub fn paper_schedule(&self, header: &str) -> String {
-        format!(
-            r#"{preamble}
-[[stage]]
-name = "affine"
-attachment = "ssd"
-transform = "affine.txt"
-mu = 1.0
-al_iterations = 1
-max_iterations = {ssd}
-
-[[stage]]
-name = "dice"
-attachment = "dice"
-image = "target.nii.gz"
-constraint_units = "relative"   # dimensionless: every spoke weighs alike (absolute: mm², SPEC §3)
-mu = 0.02
-mu_factor = 10.0
-al_iterations = {al}
-max_iterations = {dice}
-"#,
-            preamble = self.preamble(
-                header,
-                "As in the paper: one SSD AL iteration (mu = 1) towards the affine initialisation, \
-                 then the\n# Dice attachment with mu rising tenfold per AL iteration. The \
-                 constraints are in relative units\n# (mu = 0.02 ... 2000: on cmrep's t001 about \
-                 the paper's 0.001 ... 100 in mm²)."
-            ),
-            ssd = self.affine_iterations,
-            al = DICE_AL_ITERATIONS,
-            dice = self.dice_iterations,
-        )
+    pub fn paper_schedule(&self) -> Config {
+        let mut affine = StageConfig::new("affine", AttachmentKind::Ssd);
+        affine.transform = Some("affine.txt".into());
+        affine.mu = 1.0;
+        affine.al_iterations = 1;
+        affine.max_iterations = self.affine_iterations;
+        let mut dice = StageConfig::new("dice", AttachmentKind::Dice);
+        dice.image = Some("target.nii.gz".into());
+        dice.constraint_units = ConstraintUnitsConfig::Relative;
+        dice.mu = 0.02;
+        dice.mu_factor = 10.0;
+        dice.al_iterations = DICE_AL_ITERATIONS;
+        dice.max_iterations = self.dice_iterations;
+        self.config(vec![affine, dice])
     }
 
     /// The constrained SSD fit to the warped boundary points (`fit_boundary.toml`): target
     /// `target_boundary.vtk` (known correspondence), constraints in relative units, μ = 20, 200,
-    /// 2000, 20000 over [`BOUNDARY_AL_ITERATIONS`] AL iterations. `header` explains the case.
-    pub fn boundary_ssd(&self, header: &str) -> String {
-        format!(
-            r#"{preamble}
-[[stage]]
-name = "boundary"
-attachment = "ssd"
-target = "target_boundary.vtk"
-constraints = true
-constraint_units = "relative"   # dimensionless: every spoke weighs alike (absolute: mm², SPEC §3)
-mu = 20.0
-mu_factor = 10.0
-al_iterations = {al}
-max_iterations = {ssd}
-"#,
-            preamble = self.preamble(
-                header,
-                "SSD fit of the template's boundary points to the warped ones (known \
-                 correspondence), with\n# the medial constraints on in relative units, mu = 20, \
-                 200, 2000, 20000."
-            ),
-            al = BOUNDARY_AL_ITERATIONS,
-            ssd = self.boundary_iterations,
-        )
+    /// 2000, 20000 over [`BOUNDARY_AL_ITERATIONS`] AL iterations.
+    pub fn boundary_ssd(&self) -> Config {
+        let mut boundary = StageConfig::new("boundary", AttachmentKind::Ssd);
+        boundary.target = Some("target_boundary.vtk".into());
+        boundary.constraints = Some(true);
+        boundary.constraint_units = ConstraintUnitsConfig::Relative;
+        boundary.mu = 20.0;
+        boundary.mu_factor = 10.0;
+        boundary.al_iterations = BOUNDARY_AL_ITERATIONS;
+        boundary.max_iterations = self.boundary_iterations;
+        self.config(vec![boundary])
     }
 
-    /// The comment lines `header` and `schedule`, then `[model]`, `[flow]` and `[output]`.
-    fn preamble(&self, header: &str, schedule: &str) -> String {
-        format!(
-            r#"{header}# {schedule}
-
-[model]
-template = "template.vtk"
-
-[flow]
-sigma = {sigma:?}          # kernel width, mm
-time_steps = {steps}
-kinetic_weight = {kinetic:?}
-
-[output]
-every_time_point = true
-"#,
-            sigma = (self.sigma * 100.0).round() / 100.0,
-            steps = self.time_steps,
-            kinetic = self.kinetic_weight,
-        )
+    /// A config of `template.vtk` with this plan's flow (σ rounded to 0.01 mm) and `stages`.
+    fn config(&self, stages: Vec<StageConfig>) -> Config {
+        Config {
+            model: ModelConfig {
+                template: "template.vtk".into(),
+            },
+            flow: FlowConfig {
+                sigma: (self.sigma * 100.0).round() / 100.0,
+                time_steps: self.time_steps,
+                kinetic_weight: self.kinetic_weight,
+            },
+            output: OutputConfig::default(),
+            stages,
+        }
     }
 }
 
-/// Writes `text` to `path` atomically.
-fn write_text(path: &Path, text: &str) -> Result<(), CliError> {
-    Ok(medial_io::atomic::write_atomic(path, |w| {
-        w.write_all(text.as_bytes())
-    })?)
-}
+/// The comment line of `fit.toml` on its schedule.
+const PAPER_SCHEDULE_NOTE: &str = "# As in the paper: one SSD AL iteration (mu = 1) towards \
+the affine initialisation, then the\n# Dice attachment with mu rising tenfold per AL iteration. \
+The constraints are in relative units\n# (mu = 0.02 ... 2000: on cmrep's t001 about the \
+paper's 0.001 ... 100 in mm²).\n";
+
+/// The comment line of `fit_boundary.toml` on its schedule.
+const BOUNDARY_SSD_NOTE: &str = "# SSD fit of the template's boundary points to the warped \
+ones (known correspondence), with\n# the medial constraints on in relative units, mu = 20, 200, \
+2000, 20000.\n";

@@ -1,5 +1,5 @@
-//! `medial warp`: turns any cmrep template into a synthetic validation case with a known smooth
-//! diffeomorphism, as `medial synth` does for its built-in shapes.
+//! `medial synth --from TEMPLATE.vtk`: turns any cmrep template into a synthetic validation case
+//! with a known smooth diffeomorphism, as `medial synth` does for its built-in shapes.
 //!
 //! The warp is `φ(p) = c + t + A·F·B_κ(T_τ(Fᵀ(p − c)))` ([`medial_core::synth::Warp`]): a twist
 //! `T_τ` about and a bend `B_κ` of the template's long principal axis (z of the frame `F`),
@@ -9,10 +9,10 @@
 //! rasterized warped shape, the affine part and two configs: `fit_boundary.toml` (constrained
 //! SSD to the warped points) and `fit.toml` (the paper's affine SSD → Dice schedule).
 
+use super::{CaseFiles, FitPlan, SynthArgs, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE};
 use crate::error::CliError;
-use crate::inflate_cmd::{model_error, print_json, TemplateSummary};
+use crate::output::{model_error, print_json, TemplateSummary};
 use crate::stage::read_affine;
-use crate::synth_cmd::{CaseFiles, FitPlan};
 use medial_core::mesh::topology::signed_volume;
 use medial_core::model::template::MedialTemplate;
 use medial_core::synth::{
@@ -30,48 +30,69 @@ const DEFAULT_SCALE: f64 = 1.03;
 /// Default affine part: shift along `(1, 1, 1)/√3`, mm.
 const DEFAULT_SHIFT_MM: f64 = 1.0;
 
-/// Turn a cmrep template into a synthetic case: a known twist + bend + affine warp of it.
+/// Default bend of the long principal axis from end to end, degrees.
+const DEFAULT_BEND_DEG: f64 = 25.0;
+/// Default twist about the long principal axis from end to end, degrees.
+const DEFAULT_TWIST_DEG: f64 = 10.0;
+/// Default voxel size of the target image, mm.
+const DEFAULT_SPACING_MM: f64 = 0.5;
+
+/// The warp of `medial synth --from` (each option needs --from).
 #[derive(clap::Args, Debug)]
 pub struct WarpArgs {
-    /// The template: a cmrep boundary template (legacy VTK polydata with a MedialIndex point
-    /// array; coordinates in mm).
-    #[arg(value_name = "TEMPLATE.vtk")]
-    pub template: PathBuf,
-    /// Folder to write into (created if needed; files of the same names are replaced).
-    #[arg(long, value_name = "DIR")]
-    pub out: PathBuf,
-    /// Bend of the template's long principal axis from end to end, degrees (towards its
-    /// thinnest principal direction; negative: the other way; less than 360 in magnitude).
+    /// With --from: bend of the template's long principal axis from end to end, degrees
+    /// (towards its thinnest principal direction; negative: the other way; less than 360 in
+    /// magnitude) [default: 25].
     #[arg(
         long,
         value_name = "DEG",
-        default_value_t = 25.0,
-        allow_negative_numbers = true
+        allow_negative_numbers = true,
+        requires = "from"
     )]
-    pub bend: f64,
-    /// Twist of the template about its long principal axis from end to end, degrees.
+    pub bend: Option<f64>,
+    /// With --from: twist of the template about its long principal axis from end to end,
+    /// degrees [default: 10].
     #[arg(
         long,
         value_name = "DEG",
-        default_value_t = 10.0,
-        allow_negative_numbers = true
+        allow_negative_numbers = true,
+        requires = "from"
     )]
-    pub twist: f64,
-    /// Affine part of the warp, applied after the twist and bend: a text file of 16 numbers,
-    /// a 4×4 world matrix (mm) row by row, last row 0 0 0 1, positive determinant [default: a
-    /// rotation by 5° about (1, 1, 1)/√3 and a scaling by 1.03, both about the template's
-    /// centre, then a shift by 1 mm along (1, 1, 1)/√3].
-    #[arg(long, value_name = "FILE")]
+    pub twist: Option<f64>,
+    /// With --from: affine part of the warp, applied after the twist and bend: a text file of
+    /// 16 numbers, a 4×4 world matrix (mm) row by row, last row 0 0 0 1, positive determinant
+    /// [default: a rotation by 5° about (1, 1, 1)/√3 and a scaling by 1.03, both about the
+    /// template's centre, then a shift by 1 mm along (1, 1, 1)/√3].
+    #[arg(long, value_name = "FILE", requires = "from")]
     pub affine: Option<PathBuf>,
-    /// Voxel size of the target image, mm.
-    #[arg(long, value_name = "MM", default_value_t = 0.5)]
-    pub spacing: f64,
-    /// Margin between the target and the border of its image, mm.
-    #[arg(long, value_name = "MM", default_value_t = 3.0)]
-    pub margin: f64,
 }
 
-/// What `medial warp` prints.
+/// The options of one case from a template, defaults applied.
+struct Options<'a> {
+    template: &'a Path,
+    out: &'a Path,
+    bend: f64,
+    twist: f64,
+    affine: Option<&'a Path>,
+    spacing: f64,
+    margin: f64,
+}
+
+impl<'a> Options<'a> {
+    fn of(args: &'a SynthArgs, template: &'a Path) -> Self {
+        Self {
+            template,
+            out: &args.out,
+            bend: args.warp.bend.unwrap_or(DEFAULT_BEND_DEG),
+            twist: args.warp.twist.unwrap_or(DEFAULT_TWIST_DEG),
+            affine: args.warp.affine.as_deref(),
+            spacing: args.spacing.unwrap_or(DEFAULT_SPACING_MM),
+            margin: args.margin,
+        }
+    }
+}
+
+/// What `medial synth --from` prints.
 #[derive(Serialize)]
 struct WarpSummary {
     template_file: PathBuf,
@@ -185,9 +206,10 @@ impl Geometry {
 /// Reads the template, builds the warp and the targets, writes `template.vtk`,
 /// `target_boundary.vtk`, `target.nii.gz`, `affine.txt`, `fit_boundary.toml` and `fit.toml`
 /// into the folder and prints a summary.
-pub fn run(args: &WarpArgs) -> Result<(), CliError> {
-    let template = medial_io::cmrep::read_template(&args.template)?;
-    let in_template = |e| model_error(&args.template, e);
+pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
+    let args = &Options::of(args, template_path);
+    let template = medial_io::cmrep::read_template(args.template)?;
+    let in_template = |e| model_error(args.template, e);
     let boundary = boundary_mesh(&template).map_err(in_template)?;
     let axes = PrincipalAxes::of(boundary.points()).map_err(in_template)?;
     let warp = build_warp(args, &axes)?;
@@ -203,11 +225,19 @@ pub fn run(args: &WarpArgs) -> Result<(), CliError> {
         image: &image,
         affine: warp.affine(),
         configs: &[
-            ("fit_boundary.toml", plan.boundary_ssd(&header)),
-            ("fit.toml", plan.paper_schedule(&header)),
+            (
+                "fit_boundary.toml",
+                plan.boundary_ssd()
+                    .to_toml(&format!("{header}{BOUNDARY_SSD_NOTE}"))?,
+            ),
+            (
+                "fit.toml",
+                plan.paper_schedule()
+                    .to_toml(&format!("{header}{PAPER_SCHEDULE_NOTE}"))?,
+            ),
         ],
     }
-    .write(&args.out)?;
+    .write(args.out)?;
     let affine = nalgebra::Affine3::from_matrix_unchecked(warp.affine());
     let moved = |p: &Vec3| affine.transform_point(&(*p).into()).coords;
     let (displacement_mean_mm, displacement_max_mm) = mean_max(
@@ -226,8 +256,8 @@ pub fn run(args: &WarpArgs) -> Result<(), CliError> {
     );
     let template_summary = TemplateSummary::of(&template);
     print_json(&WarpSummary {
-        template_file: args.template.clone(),
-        out: args.out.clone(),
+        template_file: args.template.into(),
+        out: args.out.into(),
         warp: figures(args, &warp, &axes, boundary.points()),
         displacement_mean_mm,
         displacement_max_mm,
@@ -245,11 +275,11 @@ pub fn run(args: &WarpArgs) -> Result<(), CliError> {
 
 /// The warp of the options: twist and bend along `axes`, then the affine part of `--affine`
 /// or the default similarity about the centre.
-fn build_warp(args: &WarpArgs, axes: &PrincipalAxes) -> Result<Warp, CliError> {
+fn build_warp(args: &Options<'_>, axes: &PrincipalAxes) -> Result<Warp, CliError> {
     let bent = Warp::bending(axes, args.bend, args.twist, &Matrix4::identity()).map_err(|e| {
         CliError::Input(format!("--bend {} --twist {}: {e}", args.bend, args.twist))
     })?;
-    match &args.affine {
+    match args.affine {
         Some(path) => {
             let affine = read_affine(path)?.into_inner();
             bent.with_affine(&affine).map_err(|e| model_error(path, e))
@@ -273,9 +303,9 @@ fn default_affine(centre: Vec3) -> Matrix4<f64> {
 
 /// The comment lines at the top of the configs: where the case comes from, the warp, the
 /// choice of σ.
-fn header(args: &WarpArgs, warp: &Warp, g: &Geometry) -> String {
-    let name = file_name(&args.template);
-    let affine = match &args.affine {
+fn header(args: &Options<'_>, warp: &Warp, g: &Geometry) -> String {
+    let name = file_name(args.template);
+    let affine = match args.affine {
         Some(path) => format!("the affine map of {}", file_name(path)),
         None => format!(
             "the default affine map: rotation {DEFAULT_ROTATION_DEG}° about (1,1,1)/√3 and\n# \
@@ -283,7 +313,7 @@ fn header(args: &WarpArgs, warp: &Warp, g: &Geometry) -> String {
         ),
     };
     format!(
-        "# Synthetic case made from the template {name} by `medial warp`
+        "# Synthetic case made from the template {name} by `medial synth --from`
 # (--bend {bend} --twist {twist}).
 # phi(p) = c + t + A F B_kappa(T_tau(F^T (p - c))): a twist (tau = {tau:.6} rad/mm) and a bend
 # (kappa = {kappa:.6} 1/mm) of the template's long principal axis (z of F) across its thinnest
@@ -310,7 +340,7 @@ fn header(args: &WarpArgs, warp: &Warp, g: &Geometry) -> String {
     )
 }
 
-fn figures(args: &WarpArgs, warp: &Warp, axes: &PrincipalAxes, points: &[Vec3]) -> WarpFigures {
+fn figures(args: &Options<'_>, warp: &Warp, axes: &PrincipalAxes, points: &[Vec3]) -> WarpFigures {
     let column = |k: usize| {
         let v = warp.frame.matrix().column(k);
         [v[0], v[1], v[2]]

@@ -1,17 +1,15 @@
-//! `medial eval`: the objective of a stage at given controls, without optimising.
+//! `medial eval`: the objective of a stage at given momenta, without optimising.
 
 use crate::config::Config;
 use crate::error::CliError;
-use crate::fit::{end_figures, flow_of};
-use crate::model::Model;
-use crate::report::Figures;
-use crate::stage;
+use crate::stage::{self, flow_of};
+use crate::summary::Figures;
 use medial_core::fit::objective::{ConstraintSet, Objective, Penalty};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `medial eval` beyond the config.
 pub struct EvalOptions {
-    /// Controls, `[N, k, 3]`.
+    /// Momenta, `[N, k, 3]`.
     pub momenta: PathBuf,
     /// Stage whose objective is evaluated (default: the first).
     pub stage: Option<String>,
@@ -32,12 +30,12 @@ pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> 
         })?,
         None => &config.stages[0],
     };
-    let model = Model::load(&config.model.template)?;
+    let model = medial_io::model::read_model(&config.model.template)?;
     let k = model.landmarks().len();
     let flow = flow_of(config, k)?;
     let prepared = stage::prepare(stage_cfg, &model)?;
     let steps = flow.time_steps();
-    let controls = read_array(&options.momenta, &[steps, k, 3], "momenta")?;
+    let momenta = read_array(&options.momenta, &[steps, k, 3], "momenta")?;
     let constraints = prepared.constraints.as_ref();
     let lambda = match (&options.lambda, constraints) {
         (Some(path), Some(c)) => read_array(path, &[steps, c.len()], "lambda")?,
@@ -52,7 +50,7 @@ pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> 
         &flow,
         model.landmarks(),
         prepared.attachment.as_ref(),
-        stage_cfg.data_weight(),
+        prepared.data_weight,
     );
     if let Some(c) = constraints {
         let mu = options.mu.unwrap_or(stage_cfg.mu);
@@ -62,12 +60,12 @@ pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> 
             lambda: &lambda,
         })?;
     }
-    let mut gradient = options.gradient.as_ref().map(|_| vec![0.0; controls.len()]);
-    let evaluation = objective.evaluate(&controls, gradient.as_deref_mut())?;
+    let mut gradient = options.gradient.as_ref().map(|_| vec![0.0; momenta.len()]);
+    let evaluation = objective.evaluate(&momenta, gradient.as_deref_mut())?;
     if let (Some(path), Some(g)) = (&options.gradient, &gradient) {
         medial_io::npy::write_npy(path, &[steps, k, 3], g)?;
     }
-    end_figures(&model, &prepared, &evaluation)
+    prepared.end_figures(&model, &evaluation)
 }
 
 /// Reads a `.npy` array and checks its shape.

@@ -2,7 +2,7 @@
 //! so that its medial constraints hold. Prints the figures before and after as JSON.
 
 use crate::error::CliError;
-use crate::inflate_cmd::{model_error, print_json, write_options, TemplateSummary};
+use crate::output::{model_error, print_json, write_options, TemplateSummary};
 use medial_core::build::project::{project, ConstraintFigures, ProjectOptions};
 use serde::Serialize;
 use std::path::PathBuf;

@@ -2,7 +2,7 @@
 //! grid of a given image or on an axis-aligned grid around the mesh.
 
 use crate::error::CliError;
-use crate::inflate_cmd::{model_error, print_json};
+use crate::output::{model_error, print_json};
 use medial_core::image::rasterize::{grid_around, rasterize};
 use medial_io::nifti_volume::{write_nifti, NiftiType};
 use serde::Serialize;

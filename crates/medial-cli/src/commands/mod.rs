@@ -1,0 +1,114 @@
+//! The commands of `medial`, one module each: [`fit`] and [`eval`] run a TOML schedule;
+//! [`inflate`], [`project`] and [`synth`] build templates and synthetic cases; [`rasterize`]
+//! turns a closed mesh into a mask.
+
+mod eval;
+mod fit;
+mod inflate;
+mod project;
+mod rasterize;
+mod synth;
+
+use crate::config::Config;
+use crate::error::CliError;
+use crate::output::print_json;
+use clap::Subcommand;
+use std::path::PathBuf;
+
+/// The commands of `medial`.
+#[derive(Subcommand)]
+pub enum Command {
+    /// Run the stages of a TOML config and write summary.json, log.csv, momenta.npy, the flow
+    /// of the model (flow/boundary_tNNN.vtk, flow/medial_tNNN.vtk), time_points.csv (medial
+    /// templates) and fitted_template.vtk.
+    Fit {
+        /// The config file (TOML); relative paths in it are relative to its folder.
+        config: PathBuf,
+        /// Output folder (created if needed) [default: "out" beside the config].
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+    },
+    /// Evaluate a stage's objective at given momenta without optimising; prints one JSON object.
+    Eval {
+        /// The config file (TOML).
+        config: PathBuf,
+        /// Momenta u, a float64 .npy array of shape [N, k, 3] (coordinate unit per unit time).
+        #[arg(long, value_name = "U.npy")]
+        momenta: PathBuf,
+        /// Stage whose objective is evaluated [default: the first].
+        #[arg(long, value_name = "NAME")]
+        stage: Option<String>,
+        /// Penalty weight μ [default: the stage's mu].
+        #[arg(long, value_name = "X")]
+        mu: Option<f64>,
+        /// Lagrange multipliers, .npy of shape [N, L] [default: zeros].
+        #[arg(long, value_name = "LAM.npy")]
+        lambda: Option<PathBuf>,
+        /// Also write the gradient ∂E/∂u as .npy of shape [N, k, 3].
+        #[arg(long, value_name = "G.npy")]
+        gradient: Option<PathBuf>,
+    },
+    /// Inflate a medial sheet (a triangle mesh with a Radius per vertex, optionally
+    /// Loop-subdivided) into a cmrep boundary template; prints a JSON summary.
+    Inflate(inflate::InflateArgs),
+    /// Move a template's points as little as possible so that its medial constraints hold
+    /// (spokes normal to the boundary, equal spokes per atom); prints the figures as JSON.
+    Project(project::ProjectArgs),
+    /// Write a synthetic case into a folder: a built-in shape (cup, toy) or, with --from, any
+    /// cmrep template, a target segmentation and the target boundary points from a known
+    /// twist + bend + affine deformation, the affine part, and ready configs.
+    Synth(synth::SynthArgs),
+    /// Rasterize a closed triangle mesh into a binary NIfTI mask.
+    Rasterize(rasterize::RasterizeArgs),
+}
+
+/// Runs `command` with `threads` worker threads in use.
+pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError> {
+    match command {
+        Command::Fit { config, out } => {
+            let cfg = Config::load(&config)?;
+            let out = out.unwrap_or_else(|| {
+                config
+                    .parent()
+                    .unwrap_or(std::path::Path::new("."))
+                    .join("out")
+            });
+            let summary = fit::run(
+                &cfg,
+                &fit::FitOptions {
+                    out: out.clone(),
+                    threads,
+                    quiet,
+                },
+            )?;
+            print_json(&summary.final_figures)?;
+            eprintln!("results in {}", out.display());
+        }
+        Command::Eval {
+            config,
+            momenta,
+            stage,
+            mu,
+            lambda,
+            gradient,
+        } => {
+            let cfg = Config::load(&config)?;
+            let figures = eval::run(
+                &cfg,
+                &eval::EvalOptions {
+                    momenta,
+                    stage,
+                    mu,
+                    lambda,
+                    gradient,
+                },
+            )?;
+            print_json(&figures)?;
+        }
+        Command::Inflate(args) => inflate::run(&args)?,
+        Command::Project(args) => project::run(&args)?,
+        Command::Synth(args) => synth::run(&args)?,
+        Command::Rasterize(args) => rasterize::run(&args)?,
+    }
+    Ok(())
+}

@@ -1,0 +1,117 @@
+//! The figures of a fit: those of one configuration ([`Figures`], as `medial eval` prints them
+//! and `log.csv` rows hold them), of each stage and of the whole fit (`summary.json`).
+
+use crate::time_points::OverTime;
+use medial_core::fit::objective::Evaluation;
+use medial_core::model::metrics::SpokeMetrics;
+use serde::Serialize;
+
+/// The figures of a configuration, as in `summary.json` (`final` and each stage) and the
+/// output of `medial eval`. Kinetic energy and data term are unweighted.
+#[derive(Clone, Debug, Serialize)]
+pub struct Figures {
+    /// `E_AL`.
+    pub total: f64,
+    /// `KE`.
+    pub kinetic: f64,
+    /// `g(q^N)`.
+    pub data: f64,
+    /// Penalty `P`.
+    pub penalty: f64,
+    /// `max |C|` over time points 1…N (0 without constraints).
+    pub max_abs_constraint: f64,
+    /// Dice estimate, for Dice stages.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub dice: Option<f64>,
+    /// Dice stages, at the end of a stage: the voxel overlap `2|M ∩ A| / (|M| + |A|)` of the
+    /// rasterized model `M` with the binary foreground `A` of the image, on the image's grid.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub voxel_dice: Option<f64>,
+    /// Mean distance to the SSD targets (mm), for SSD stages.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_distance: Option<f64>,
+    /// Largest spoke–normal angle at the end of the flow, degrees (medial templates).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_spoke_normal_deg: Option<f64>,
+    /// Mean spoke–normal angle at the end of the flow, degrees (medial templates).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mean_spoke_normal_deg: Option<f64>,
+    /// Largest spoke-length mismatch at the end of the flow, % (medial templates).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_spoke_mismatch_pct: Option<f64>,
+}
+
+impl Figures {
+    /// From an evaluation, the spoke metrics at `q^N` and the SSD mean distance.
+    pub fn new(e: &Evaluation, metrics: Option<&SpokeMetrics>, mean_distance: Option<f64>) -> Self {
+        Self {
+            total: e.total,
+            kinetic: e.kinetic,
+            data: e.data,
+            penalty: e.penalty,
+            max_abs_constraint: e.max_abs_constraint,
+            dice: e.dice,
+            voxel_dice: None,
+            mean_distance,
+            max_spoke_normal_deg: metrics.map(|m| m.max_spoke_normal_deg),
+            mean_spoke_normal_deg: metrics.map(|m| m.mean_spoke_normal_deg),
+            max_spoke_mismatch_pct: metrics.map(|m| 100.0 * m.max_spoke_mismatch),
+        }
+    }
+}
+
+/// One stage in `summary.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct StageSummary {
+    /// The stage's name.
+    pub name: String,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// Value + gradient evaluations.
+    pub evaluations: usize,
+    /// L-BFGS iterations (all AL iterations).
+    pub iterations: usize,
+    /// AL iterations.
+    pub al_iterations: usize,
+    /// μ after the schedule.
+    pub mu: f64,
+    /// Why each minimisation stopped.
+    pub stop: Vec<String>,
+    /// The figures at the end of the stage.
+    #[serde(flatten)]
+    pub figures: Figures,
+}
+
+/// `summary.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    /// `medial` version.
+    pub version: &'static str,
+    /// `k`.
+    pub landmarks: usize,
+    /// Boundary points.
+    pub boundary_points: usize,
+    /// Medial atoms.
+    pub medial_atoms: usize,
+    /// Medial constraints per time point (0 for a plain mesh).
+    pub constraints_per_time_point: usize,
+    /// `N`.
+    pub time_steps: usize,
+    /// Kernel width σ.
+    pub sigma: f64,
+    /// Worker threads.
+    pub threads: usize,
+    /// Wall-clock seconds of all stages.
+    pub seconds: f64,
+    /// Value + gradient evaluations of all stages.
+    pub evaluations: usize,
+    /// Figures at the end.
+    #[serde(rename = "final")]
+    pub final_figures: Figures,
+    /// Medial templates: the worst spoke figures over time points 1 … N (`time_points.csv`
+    /// holds them per time point).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub over_time: Option<OverTime>,
+    /// Each stage.
+    pub stages: Vec<StageSummary>,
+}

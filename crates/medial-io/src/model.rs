@@ -1,0 +1,102 @@
+//! The [`Model`] a fit deforms, as VTK: read from a template file, and written at any
+//! configuration of its landmarks with the medial figures as point arrays, for ParaView.
+
+use crate::cmrep::template_from_polydata;
+use crate::vtk::{read_polydata, ArrayKind, DataArray, PolyData, ValueType};
+use crate::{Error, Result};
+use medial_core::model::{Model, SpokeMetrics};
+use medial_core::{TriMesh, Vec3};
+use std::path::Path;
+
+/// Reads a VTK template: with a `MedialIndex` point array it is a cmrep medial template
+/// ([`crate::cmrep`]), otherwise a plain triangle mesh or point set.
+pub fn read_model(path: &Path) -> Result<Model> {
+    let data = read_polydata(path)?;
+    if data.point_array_ci("MedialIndex").is_some() {
+        return Ok(Model::Medial(Box::new(template_from_polydata(
+            &data, path,
+        )?)));
+    }
+    let triangles = data.triangles().map_err(|m| Error::format(path, m))?;
+    let mesh = TriMesh::new(data.points, triangles).map_err(|e| Error::model(path, e))?;
+    if mesh.points().is_empty() {
+        return Err(Error::format(path, "the template has no points"));
+    }
+    Ok(Model::Plain(mesh))
+}
+
+/// The boundary at landmarks `q`; for a medial template with the point arrays
+/// `SpokeNormalAngle` (degrees), `SpokeMismatch` (%), `Radius` (spoke length, mm) and
+/// `MedialIndex`. A point set is written as vertices.
+pub fn boundary_polydata(model: &Model, q: &[Vec3]) -> PolyData {
+    let nb = model.boundary_count();
+    let mut data = PolyData {
+        points: q[..nb].to_vec(),
+        ..PolyData::default()
+    };
+    match model {
+        Model::Plain(mesh) if mesh.triangles().is_empty() => {
+            data.vertices = (0..nb).map(|i| vec![i]).collect();
+        }
+        Model::Plain(mesh) => data.polygons = cells(mesh.triangles()),
+        Model::Medial(t) => {
+            data.polygons = cells(t.boundary_triangles());
+            let m = SpokeMetrics::compute(t, q);
+            let atom = t.medial_index();
+            data.point_data = vec![
+                scalars(
+                    "SpokeNormalAngle",
+                    m.spoke_normal_deg.clone(),
+                    ValueType::Double,
+                ),
+                scalars(
+                    "SpokeMismatch",
+                    atom.iter().map(|&a| 100.0 * m.mismatch[a]).collect(),
+                    ValueType::Double,
+                ),
+                scalars("Radius", m.spoke_length.clone(), ValueType::Double),
+                scalars(
+                    "MedialIndex",
+                    atom.iter().map(|&a| a as f64).collect(),
+                    ValueType::Int,
+                ),
+            ];
+        }
+    }
+    data
+}
+
+/// The medial triangle mesh at landmarks `q` with the point arrays `Thickness` (2 × mean spoke
+/// length, mm) and `SpokeMismatch` (%), for a medial template.
+pub fn medial_polydata(model: &Model, q: &[Vec3]) -> Option<PolyData> {
+    let t = model.medial()?;
+    let m = SpokeMetrics::compute(t, q);
+    let nb = t.boundary_count();
+    Some(PolyData {
+        points: q[nb..].to_vec(),
+        polygons: cells(t.medial_triangles()),
+        point_data: vec![
+            scalars("Thickness", m.thickness, ValueType::Double),
+            scalars(
+                "SpokeMismatch",
+                m.mismatch.iter().map(|x| 100.0 * x).collect(),
+                ValueType::Double,
+            ),
+        ],
+        ..PolyData::default()
+    })
+}
+
+fn cells(triangles: &[[usize; 3]]) -> Vec<Vec<usize>> {
+    triangles.iter().map(|t| t.to_vec()).collect()
+}
+
+fn scalars(name: &str, values: Vec<f64>, value_type: ValueType) -> DataArray {
+    DataArray {
+        name: name.into(),
+        components: 1,
+        values,
+        kind: ArrayKind::Scalars,
+        value_type,
+    }
+}
