@@ -1,32 +1,32 @@
 //! One value + gradient evaluation of the objective (flow, kinetic energy, SSD, adjoint) with
 //! N = 40 time steps on real shapes: the t001 medial template (k = 503), and the KeOps
 //! hippocampus (k = 2,000 of its points, and all 6,611). The dense textbook implementation
-//! (`medial_core::testing::dense`) is measured in the same run as the baseline the ratios are stated against (up to
-//! k = 2,000: it holds `N` dense `k × k` matrices). The throughput is stated in pair-steps,
+//! ([`medial::testing::dense`]) is measured in the same run as the baseline the ratios are
+//! stated against (up to k = 2,000: it holds `N` dense `k × k` matrices). The throughput is stated in pair-steps,
 //! `N·k(k−1)/2` per evaluation, so criterion also reports the time per pair and step.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use medial_core::attachment::ssd::Ssd;
-use medial_core::attachment::Attachment;
-use medial_core::fit::objective::Objective;
-use medial_core::flow::{Flow, FlowParams};
-use medial_core::testing::dense;
-use medial_core::Vec3;
+use medial::attachment::ssd::Ssd;
+use medial::attachment::Attachment;
+use medial::fit::objective::Objective;
+use medial::flow::{Flow, FlowParams};
+use medial::testing::dense;
+use medial::Vec3;
 use std::path::Path;
 
 const STEPS: usize = 40;
 
 fn data(name: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data")
+        .join("../shared/data")
         .join(name)
 }
 
 /// (name, landmarks, kernel width σ in mm).
 fn cases() -> Vec<(&'static str, Vec<Vec3>, f64)> {
-    let t001 = medial_io::cmrep::read_template(&data("cmrep/t001_template_bcmrep.vtk"))
+    let t001 = medial::io::cmrep::read_template(&data("cmrep/t001_template_bcmrep.vtk"))
         .expect("t001 template");
-    let hippo = medial_io::vtk::read_polydata(&data("keops/hippos_source.vtk"))
+    let hippo = medial::io::vtk::read_polydata(&data("keops/hippos_source.vtk"))
         .expect("hippocampus")
         .points;
     let hippo_2000: Vec<Vec3> = (0..2000).map(|m| hippo[m * hippo.len() / 2000]).collect();
@@ -37,8 +37,8 @@ fn cases() -> Vec<(&'static str, Vec<Vec3>, f64)> {
     ]
 }
 
-/// Smooth controls: every landmark pushed along a slowly varying field.
-fn controls(q: &[Vec3]) -> Vec<f64> {
+/// Smooth momenta: every landmark pushed along a slowly varying field.
+fn momenta(q: &[Vec3]) -> Vec<f64> {
     (0..STEPS)
         .flat_map(|n| {
             q.iter()
@@ -65,7 +65,7 @@ fn evaluation(c: &mut Criterion) {
         let targets: Vec<Vec3> = q.iter().map(|p| p + Vec3::new(1.0, -0.5, 0.25)).collect();
         let ssd = Ssd::new(targets).expect("targets");
         let objective = Objective::new(&flow, &q, &ssd, 1.0);
-        let u = controls(&q);
+        let u = momenta(&q);
         let mut grad = vec![0.0; u.len()];
         group.bench_function(BenchmarkId::new("fused", format!("{name}_k{k}")), |b| {
             b.iter(|| {
