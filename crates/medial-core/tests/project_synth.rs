@@ -6,11 +6,12 @@ use std::path::Path;
 
 use medial_core::build::inflate::{inflate, MedialSheet};
 use medial_core::build::project::{project, ProjectOptions};
+use medial_core::mesh::subdivide::midpoint_subdivide;
 use medial_core::model::metrics::SpokeMetrics;
 use medial_core::model::template::MedialTemplate;
 use medial_core::synth::{
-    boundary_mesh, midpoint_subdivide, target_boundary, target_image, target_surface,
-    PrincipalAxes, Shape, SyntheticCase, Warp,
+    boundary_mesh, target_boundary, target_image, target_surface, PrincipalAxes, Shape,
+    SyntheticCase, Warp,
 };
 use medial_core::{Error, TriMesh, Vec3};
 use nalgebra::{Matrix3, Matrix4, Rotation3, Unit};
@@ -322,7 +323,7 @@ fn the_warped_template_matches_the_target_image() {
                 params,
             )
             .unwrap();
-            d.evaluate(q, None).unwrap().dice
+            d.dice(q, None).unwrap().dice
         };
         let (at_target_5, at_target_10) = (dice(5, &warped), dice(10, &warped));
         let at_template = dice(10, t.landmarks());

@@ -22,6 +22,8 @@
 
 use std::collections::{BTreeMap, HashMap};
 
+use crate::mesh::topology::{check_closed_oriented_manifold, MeshDefect};
+use crate::mesh::Bounds;
 use crate::{Error, Result, TriMesh, Vec3};
 
 /// A triangle counts as degenerate when `|e₁ × e₂| ≤ DEGENERATE · (longest edge)²`.
@@ -736,8 +738,7 @@ fn atoms_of(points: impl IntoIterator<Item = usize>, medial_index: &[usize]) -> 
 
 fn check_boundary(mesh: &TriMesh, medial_index: &[usize]) -> Result<()> {
     check_boundary_degenerate(mesh, medial_index)?;
-    check_closed(mesh, medial_index)?;
-    check_vertex_manifold(mesh, medial_index)?;
+    check_closed_manifold(mesh, medial_index)?;
     check_outward(mesh, medial_index)?;
     check_self_intersections(mesh, medial_index)
 }
@@ -759,61 +760,44 @@ fn check_boundary_degenerate(mesh: &TriMesh, medial_index: &[usize]) -> Result<(
     }
 }
 
-/// Every directed edge `i → j` must occur once and `j → i` once.
-fn check_closed(mesh: &TriMesh, medial_index: &[usize]) -> Result<()> {
-    let mut count: BTreeMap<(usize, usize), [usize; 2]> = BTreeMap::new();
-    for tri in mesh.triangles() {
-        for k in 0..3 {
-            let (i, j) = (tri[k], tri[(k + 1) % 3]);
-            count.entry(edge_key(i, j)).or_default()[usize::from(i > j)] += 1;
-        }
-    }
-    match count.iter().find(|(_, c)| **c != [1, 1]) {
-        Some((&(i, j), &[f, b])) => Err(Error::InvalidTemplate(format!(
+/// The boundary must be a closed, consistently oriented surface whose triangles form one fan
+/// around every vertex ([`check_closed_oriented_manifold`]); a defect is reported with the
+/// medial vertices near it.
+fn check_closed_manifold(mesh: &TriMesh, medial_index: &[usize]) -> Result<()> {
+    let edge_error = |a: usize, b: usize, triangles: &[usize]| {
+        let forward = triangles
+            .iter()
+            .filter(|&&t| traverses(&mesh.triangles()[t], a, b))
+            .count();
+        Error::InvalidTemplate(format!(
             "the inflated boundary is not a closed oriented surface: its edge between boundary \
-             points {i} and {j} (medial vertices {}) is in {f} triangle(s) one way and {b} the \
-             other (each edge needs exactly one each way); refine the sheet there",
-            atoms_of([i, j], medial_index)
-        ))),
-        None => Ok(()),
-    }
-}
-
-/// The triangles around every boundary vertex must form a single fan.
-fn check_vertex_manifold(mesh: &TriMesh, medial_index: &[usize]) -> Result<()> {
-    let mut link: Vec<Vec<(usize, usize)>> = vec![Vec::new(); mesh.points().len()];
-    for tri in mesh.triangles() {
-        for k in 0..3 {
-            link[tri[k]].push((tri[(k + 1) % 3], tri[(k + 2) % 3]));
-        }
-    }
-    for (v, ring) in link.iter().enumerate() {
-        if fan_cycle_length(ring) != ring.len() {
-            return Err(Error::InvalidTemplate(format!(
-                "boundary point {v} (medial vertex {}) is pinched: its triangles form more than \
-                 one fan",
-                medial_index[v]
-            )));
-        }
-    }
-    Ok(())
-}
-
-/// The length of the cycle through the first link edge `x → y` of a vertex (edges closed).
-fn fan_cycle_length(ring: &[(usize, usize)]) -> usize {
-    let next: HashMap<usize, usize> = ring.iter().copied().collect();
-    let Some(&(start, mut cur)) = ring.first() else {
-        return 0;
+             points {a} and {b} (medial vertices {}) is in {forward} triangle(s) one way and {} \
+             the other (each edge needs exactly one each way); refine the sheet there",
+            atoms_of([a, b], medial_index),
+            triangles.len() - forward
+        ))
     };
-    let mut length = 1;
-    while cur != start && length <= ring.len() {
-        match next.get(&cur) {
-            Some(&n) => cur = n,
-            None => return 0,
-        }
-        length += 1;
+    match check_closed_oriented_manifold(mesh) {
+        Ok(_) => Ok(()),
+        Err(MeshDefect::OpenEdge { a, b, triangle, .. }) => Err(edge_error(a, b, &[triangle])),
+        Err(MeshDefect::InconsistentOrientation {
+            a, b, triangles, ..
+        }) => Err(edge_error(a, b, &triangles)),
+        Err(MeshDefect::NonManifoldEdge {
+            a, b, triangles, ..
+        }) => Err(edge_error(a, b, &triangles)),
+        Err(MeshDefect::PinchedVertex { vertex, .. }) => Err(Error::InvalidTemplate(format!(
+            "boundary point {vertex} (medial vertex {}) is pinched: its triangles form more than \
+             one fan",
+            medial_index[vertex]
+        ))),
+        Err(other) => Err(other.into()),
     }
-    length
+}
+
+/// Whether triangle `tri` runs along its edge from `a` to `b`.
+fn traverses(tri: &[usize; 3], a: usize, b: usize) -> bool {
+    (0..3).any(|k| tri[k] == a && tri[(k + 1) % 3] == b)
 }
 
 /// Signed volume `Σ p₀ · (p₁ × p₂) / 6` of every component (points relative to their mean).
@@ -880,29 +864,6 @@ fn check_self_intersections(mesh: &TriMesh, medial_index: &[usize]) -> Result<()
 // ---------------------------------------------------------------------------------------------
 // Self-intersection test
 
-/// Axis-aligned bounding box.
-#[derive(Clone, Copy)]
-struct Aabb {
-    lo: Vec3,
-    hi: Vec3,
-}
-
-impl Aabb {
-    fn of(points: &[Vec3]) -> Self {
-        let lo = points
-            .iter()
-            .fold(Vec3::repeat(f64::INFINITY), |a, p| a.inf(p));
-        let hi = points
-            .iter()
-            .fold(Vec3::repeat(f64::NEG_INFINITY), |a, p| a.sup(p));
-        Self { lo, hi }
-    }
-
-    fn overlaps(&self, other: &Self, tol: f64) -> bool {
-        (0..3).all(|i| self.lo[i] <= other.hi[i] + tol && other.lo[i] <= self.hi[i] + tol)
-    }
-}
-
 /// The pairs of boundary triangles `(f, g)`, `f < g`, that intersect: sharing no vertex and
 /// meeting anywhere, or sharing one vertex and meeting elsewhere (the edge opposite the shared
 /// vertex of one crosses the other). Broad phase: a uniform grid of cubes about the mean
@@ -915,17 +876,19 @@ fn self_intersections(mesh: &TriMesh) -> Vec<(usize, usize)> {
         .iter()
         .map(|t| corners(points, t))
         .collect();
-    let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::of(t)).collect();
-    let all = Aabb::of(points);
-    let diagonal = (all.hi - all.lo).norm();
+    let boxes: Vec<Bounds> = tris.iter().filter_map(|t| Bounds::of(t)).collect();
+    let Some(all) = Bounds::of(points) else {
+        return Vec::new();
+    };
+    let diagonal = all.diagonal();
     let tol = SNAP * diagonal;
     let mean_extent =
-        boxes.iter().map(|b| (b.hi - b.lo).max()).sum::<f64>() / boxes.len().max(1) as f64;
+        boxes.iter().map(|b| b.extent().max()).sum::<f64>() / boxes.len().max(1) as f64;
     let cell = mean_extent.max(diagonal / 256.0).max(f64::MIN_POSITIVE);
-    let cell_of = |x: &Vec3| ((x - all.lo) / cell).map(|c| c.floor() as i64);
+    let cell_of = |x: &Vec3| ((x - all.min) / cell).map(|c| c.floor() as i64);
     let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
     for (f, b) in boxes.iter().enumerate() {
-        let (lo, hi) = (cell_of(&b.lo), cell_of(&b.hi));
+        let (lo, hi) = (cell_of(&b.min), cell_of(&b.max));
         for i in lo[0]..=hi[0] {
             for j in lo[1]..=hi[1] {
                 for k in lo[2]..=hi[2] {
@@ -938,7 +901,7 @@ fn self_intersections(mesh: &TriMesh) -> Vec<(usize, usize)> {
     for (key, members) in &grid {
         for (x, &f) in members.iter().enumerate() {
             for &g in &members[x + 1..] {
-                let corner = boxes[f].lo.sup(&boxes[g].lo);
+                let corner = boxes[f].min.sup(&boxes[g].min);
                 if boxes[f].overlaps(&boxes[g], tol)
                     && cell_of(&corner).as_slice() == key
                     && pair_intersects(

@@ -28,10 +28,11 @@ use crate::build::inflate::{inflate, MedialSheet};
 use crate::build::project::{project, ProjectOptions, Projection};
 use crate::image::rasterize::{grid_around, rasterize};
 use crate::image::volume::Volume;
+use crate::mesh::subdivide::midpoint_subdivide;
+use crate::mesh::Bounds;
 use crate::model::template::MedialTemplate;
 use crate::{Error, Result, TriMesh, Vec3};
 use nalgebra::{Matrix3, Matrix4, Rotation3, Unit};
-use std::collections::HashMap;
 use std::f64::consts::{PI, TAU};
 
 /// Cup: equatorial semi-axis `a` of the medial spheroid, mm.
@@ -395,8 +396,11 @@ impl PrincipalAxes {
             .iter()
             .map(|p| frame.inverse_transform_vector(&(p - mean)))
             .collect();
-        let (lo, hi) = bounds(&local).unwrap_or_default();
-        let extent = hi - lo;
+        let bounds = Bounds::of(&local).unwrap_or(Bounds {
+            min: Vec3::zeros(),
+            max: Vec3::zeros(),
+        });
+        let extent = bounds.extent();
         if extent.z <= 0.0 {
             return Err(Error::InvalidParameter(format!(
                 "the {} points have no extent along their long axis (all equal)",
@@ -405,7 +409,7 @@ impl PrincipalAxes {
         }
         let variance = Vec3::from_fn(|k, _| eigen.eigenvalues[order[k]].max(0.0));
         Ok(Self {
-            centre: mean + frame * ((lo + hi) / 2.0),
+            centre: mean + frame * bounds.centre(),
             frame,
             extent,
             std_dev: variance.map(f64::sqrt),
@@ -522,11 +526,12 @@ impl SyntheticCase {
             inflated.medial_points,
         )?;
         let projection = project(&template, &ProjectOptions::default())?;
-        let (lo, hi) = bounds(projection.template.landmarks()).unwrap_or_default();
+        let centre =
+            Bounds::of(projection.template.landmarks()).map_or(Vec3::zeros(), |b| b.centre());
         Ok(Self {
             shape,
             sheet,
-            warp: shape.warp((lo + hi) / 2.0),
+            warp: shape.warp(centre),
             projection,
         })
     }
@@ -563,38 +568,6 @@ pub fn boundary_mesh(template: &MedialTemplate) -> Result<TriMesh> {
     TriMesh::new(
         template.boundary_points().to_vec(),
         template.boundary_triangles().to_vec(),
-    )
-}
-
-/// Splits every triangle `(a, b, c)` into `(a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca)`
-/// with new points at edge midpoints (one per edge, numbered after the old points in order of
-/// first appearance). Keeps orientation, closedness and the surface itself.
-pub fn midpoint_subdivide(mesh: &TriMesh) -> Result<TriMesh> {
-    let mut points = mesh.points().to_vec();
-    let mut midpoints: HashMap<(usize, usize), usize> = HashMap::new();
-    let mut mid = |a: usize, b: usize, points: &mut Vec<Vec3>| {
-        *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
-            points.push((points[a] + points[b]) / 2.0);
-            points.len() - 1
-        })
-    };
-    let mut triangles = Vec::with_capacity(4 * mesh.triangles().len());
-    for &[a, b, c] in mesh.triangles() {
-        let ab = mid(a, b, &mut points);
-        let bc = mid(b, c, &mut points);
-        let ca = mid(c, a, &mut points);
-        triangles.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
-    }
-    TriMesh::new(points, triangles)
-}
-
-/// The corners `(lo, hi)` of the axis-aligned bounding box of `points` (`None` for none).
-fn bounds(points: &[Vec3]) -> Option<(Vec3, Vec3)> {
-    let first = points.first()?;
-    Some(
-        points
-            .iter()
-            .fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p))),
     )
 }
 

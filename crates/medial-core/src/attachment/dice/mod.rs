@@ -50,6 +50,8 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 
 use crate::image::volume::Volume;
+use crate::mesh::subdivide::subdivide_with;
+use crate::mesh::topology::{check_corners, check_edges, Orientation};
 use crate::{Error, Result, Vec3};
 
 /// Triangles per parallel work item (fixed, so that sums do not depend on the thread count).
@@ -270,7 +272,7 @@ impl DiceAttachment {
         })
     }
 
-    /// Number of landmarks `k` expected by [`Self::evaluate`].
+    /// Number of landmarks `k` expected by [`Self::dice`].
     pub fn landmark_count(&self) -> usize {
         self.landmark_count
     }
@@ -295,7 +297,7 @@ impl DiceAttachment {
     ///
     /// Refuses `q` or `grad` of the wrong length. Non-finite positions give NaN, not an error
     /// (so that an optimiser's line search can back off).
-    pub fn evaluate(&self, q: &[Vec3], grad: Option<&mut [Vec3]>) -> Result<DiceValue> {
+    pub fn dice(&self, q: &[Vec3], grad: Option<&mut [Vec3]>) -> Result<DiceValue> {
         self.check_len("landmark positions", q.len())?;
         if let Some(g) = grad.as_deref() {
             self.check_len("Dice gradient buffer", g.len())?;
@@ -569,9 +571,9 @@ fn side_faces(tri: &[usize; 3], a: usize) -> [[usize; 3]; 2] {
     }
 }
 
-/// Midpoint subdivision, `levels` times, of the mesh over points `0..n`. Returns each vertex
-/// as a combination of the input points, and the triangles (orientation kept). New vertex ids
-/// are given in the order edges are met, so the result is deterministic.
+/// Midpoint subdivision ([`crate::mesh::subdivide`]), `levels` times, of the mesh over points
+/// `0..n`. Returns each vertex as a combination of the input points, and the triangles
+/// (orientation kept).
 fn subdivide(
     n: usize,
     triangles: &[[usize; 3]],
@@ -580,21 +582,7 @@ fn subdivide(
     let mut vertices: Vec<Combination> = (0..n).map(Combination::single).collect();
     let mut triangles = triangles.to_vec();
     for _ in 0..levels {
-        let mut midpoints: HashMap<(usize, usize), usize> = HashMap::new();
-        let mut midpoint = |a: usize, b: usize, vertices: &mut Vec<Combination>| {
-            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                vertices.push(Combination::midpoint(&vertices[a], &vertices[b]));
-                vertices.len() - 1
-            })
-        };
-        let mut finer = Vec::with_capacity(4 * triangles.len());
-        for &[a, b, c] in &triangles {
-            let ab = midpoint(a, b, &mut vertices);
-            let bc = midpoint(b, c, &mut vertices);
-            let ca = midpoint(c, a, &mut vertices);
-            finer.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
-        }
-        triangles = finer;
+        triangles = subdivide_with(&mut vertices, &triangles, Combination::midpoint);
     }
     (vertices, triangles)
 }
@@ -616,50 +604,9 @@ fn check_model(triangles: &[[usize; 3]], medial_of: &[usize], k: usize) -> Resul
             "boundary point {b} has medial point {m}, outside the medial landmarks {nb}..{k}"
         )));
     }
-    for (t, tri) in triangles.iter().enumerate() {
-        if let Some(&v) = tri.iter().find(|&&v| v >= nb) {
-            return Err(Error::InvalidMesh(format!(
-                "boundary triangle {t} uses point {v} but there are {nb} boundary points"
-            )));
-        }
-        if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
-            return Err(Error::InvalidMesh(format!(
-                "boundary triangle {t} repeats a corner: {tri:?}"
-            )));
-        }
-    }
-    check_closed_oriented(triangles)?;
+    check_corners(nb, triangles)?;
+    check_edges(triangles, Orientation::Consistent)?;
     check_medial_caps(triangles, medial_of)
-}
-
-/// Every directed edge once, and its reverse once.
-fn check_closed_oriented(triangles: &[[usize; 3]]) -> Result<()> {
-    let mut directed: HashMap<(usize, usize), usize> = HashMap::new();
-    for (t, tri) in triangles.iter().enumerate() {
-        for e in 0..3 {
-            let edge = (tri[e], tri[(e + 1) % 3]);
-            if let Some(first) = directed.insert(edge, t) {
-                return Err(Error::InvalidMesh(format!(
-                    "boundary triangles {first} and {t} both contain the directed edge {edge:?}: \
-                     the boundary is non-manifold or inconsistently oriented"
-                )));
-            }
-        }
-    }
-    let mut open: Vec<((usize, usize), usize)> = directed
-        .iter()
-        .filter(|(e, _)| !directed.contains_key(&(e.1, e.0)))
-        .map(|(&e, &t)| (e, t))
-        .collect();
-    open.sort_unstable();
-    match open.first() {
-        None => Ok(()),
-        Some(&((a, b), t)) => Err(Error::InvalidMesh(format!(
-            "the boundary is open: edge ({a}, {b}) of triangle {t} has no opposite triangle \
-             ({} open edges)",
-            open.len()
-        ))),
-    }
 }
 
 /// Every non-degenerate medial triangle must occur as often with one orientation as with the
