@@ -145,8 +145,9 @@ impl LoopTangents {
         let n = self.len();
         let mut triplets = TriMat::with_capacity((n, n), self.neighbours.len());
         for (b, w) in self.offsets.windows(2).enumerate() {
-            for i in w[0]..w[1] {
-                triplets.add_triplet(b, self.neighbours[i], values[i]);
+            let range = w[0]..w[1];
+            for (&v, &value) in self.neighbours[range.clone()].iter().zip(&values[range]) {
+                triplets.add_triplet(b, v, value);
             }
         }
         triplets.to_csr()

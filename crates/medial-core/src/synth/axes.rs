@@ -4,7 +4,7 @@ use crate::mesh::Bounds;
 use crate::{Error, Result, Vec3};
 use nalgebra::{Matrix3, Rotation3};
 
-/// The principal axes of a point set, as [`Warp::bending`] uses them.
+/// The principal axes of a point set, as [`Warp::bending`](super::Warp::bending) uses them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PrincipalAxes {
     /// Centre of the bounding box of the points in the frame, `mean + F·(lo + hi)/2`, mm.

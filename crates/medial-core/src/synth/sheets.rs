@@ -77,8 +77,8 @@ pub type ParameterGrid = (Vec<[f64; 2]>, Vec<[usize; 3]>);
 /// `(u, v) = (i/nu, j/nv)` in `[0, 1]²` (point `j(nu+1) + i`) and `2 nu nv` triangles, each
 /// cell split along the diagonal through its corner with even `i + j`, counter-clockwise in
 /// `(u, v)`. With `nu`, `nv` even no triangle has two edges on the border of the grid, as
-/// [`inflate`] requires. Mapping the parameters to points and radii gives a [`MedialSheet`]
-/// (the toy's sheets are three such grids sharing the column `u = 0`).
+/// [`inflate`](crate::build::inflate()) requires. Mapping the parameters to points and radii
+/// gives a [`MedialSheet`] (the toy's sheets are three such grids sharing the column `u = 0`).
 ///
 /// Errors: `InvalidParameter` if `nu` or `nv` is 0.
 pub fn parameter_grid(nu: usize, nv: usize) -> Result<ParameterGrid> {
