@@ -618,5 +618,15 @@ mod tests {
             ),
             "{d:?}"
         );
+        // Around vertex 0, the walk 1 → 2 → 3 → 2 … never comes back to 1.
+        let d = defect(vertex_rings(4, &[[0, 1, 2], [0, 2, 3], [0, 3, 2]]));
+        assert_eq!(
+            d,
+            MeshDefect::UnclosedRing {
+                vertex: 0,
+                ring: vec![1, 2, 3]
+            }
+        );
+        assert!(d.to_string().contains("do not form a fan"), "{d}");
     }
 }
