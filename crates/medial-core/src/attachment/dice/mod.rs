@@ -5,9 +5,10 @@
 //! **Sampling** (`sampling`). The boundary mesh is subdivided `S` times (each new vertex the
 //! midpoint of its edge), so every subdivided boundary vertex is a fixed combination
 //! `b = Σ w_j q_{b_j}` of at most three boundary landmarks, and its medial point
-//! `m = Σ w_j q_{M[b_j]}` the same combination of their medial points. Sheets `x_i = (1 − s_i) b + s_i m`, `s_i = i / layers`,
-//! join the boundary (`s = 0`) to the medial sheet (`s = 1`); the image is sampled half way
-//! between consecutive sheets, at `y_i = (1 − s_{i+½}) b + s_{i+½} m`, `i = 0 … layers − 1`.
+//! `m = Σ w_j q_{M[b_j]}` the same combination of their medial points. Sheets
+//! `x_i = (1 − s_i) b + s_i m`, `s_i = i / layers`, join the boundary (`s = 0`) to the medial
+//! sheet (`s = 1`); the image is sampled half way between consecutive sheets, at
+//! `y_i = (1 − s_{i+½}) b + s_{i+½} m`, `i = 0 … layers − 1`.
 //!
 //! **Volume elements.** Between consecutive sheets, over each subdivided triangle, lies a
 //! prism; the prisms tile the model, so that their signed volumes add up to the volume enclosed
