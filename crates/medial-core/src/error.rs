@@ -1,11 +1,18 @@
 //! The one error type of the engine.
 
+use crate::mesh::topology::MeshDefect;
+
 /// Everything that can go wrong inside the engine. Messages say what and where, so that the
 /// command-line tool can print them as they are.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
-    /// A triangle mesh is unusable: an index out of range, a degenerate or non-triangle cell,
-    /// an open or non-manifold or inconsistently oriented surface.
+    /// A triangle mesh is not a valid closed, consistently and outwardly oriented surface: an
+    /// index out of range, an open, non-manifold or inconsistently oriented edge, a pinched
+    /// vertex, an inward orientation (see [`MeshDefect`]).
+    #[error("invalid mesh: {0}")]
+    Mesh(#[from] MeshDefect),
+    /// A triangle mesh is unusable for a particular purpose, said in that purpose's words (a
+    /// medial sheet with a degenerate triangle, a mesh to rasterize that is open).
     #[error("invalid mesh: {0}")]
     InvalidMesh(String),
     /// A medial template is inconsistent (medial indices, spokes, radii, medial points).

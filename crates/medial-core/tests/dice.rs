@@ -276,7 +276,7 @@ fn the_thick_disc_is_a_valid_closed_model() {
     assert_eq!(dice.landmark_count(), disc.q.len());
     let expected = disc.enclosed_volume(&disc.q);
     assert!(expected > 0.0);
-    let v = dice.evaluate(&disc.q, None).unwrap();
+    let v = dice.dice(&disc.q, None).unwrap();
     assert!(
         (v.model_volume - expected).abs() < 1e-9 * expected,
         "{} vs {expected}",
@@ -300,7 +300,7 @@ proptest! {
         let disc = thick_disc(3, 6.0, 2.0);
         let q = perturbed(&disc.q, amplitude, seed);
         let dice = disc.attachment(unit_image(), DiceParams { subdivision, layers });
-        let v = dice.evaluate(&q, None).unwrap();
+        let v = dice.dice(&q, None).unwrap();
         let expected = disc.enclosed_volume(&q);
         prop_assert!((v.model_volume - expected).abs() <= 1e-12 * disc.volume_scale(&q) * 64.0,
             "prisms {} vs enclosed {expected}", v.model_volume);
@@ -314,7 +314,7 @@ fn prisms_tile_the_real_template_under_perturbations() {
     let dice = model.attachment(unit_image(), DiceParams::default());
     for (seed, amplitude) in [(1, 0.0), (2, 0.5), (3, 3.0), (4, 30.0)] {
         let q = perturbed(&model.q, amplitude, seed);
-        let v = dice.evaluate(&q, None).unwrap();
+        let v = dice.dice(&q, None).unwrap();
         let expected = model.enclosed_volume(&q);
         let error = (v.model_volume - expected).abs() / model.volume_scale(&q);
         assert!(
@@ -330,7 +330,7 @@ fn prisms_tile_the_real_template_under_perturbations() {
             assert!(v.negative_volume > -1e-3 * v.model_volume);
         }
     }
-    let folded = dice.evaluate(&perturbed(&model.q, 30.0, 4), None).unwrap();
+    let folded = dice.dice(&perturbed(&model.q, 30.0, 4), None).unwrap();
     assert!(
         folded.negative_volume < 0.0,
         "a scrambled model must report negative volume"
@@ -361,7 +361,7 @@ fn dice_matches_the_voxel_overlap_of_the_rasterized_model() {
     ] {
         let v = disc
             .attachment(image.clone(), params)
-            .evaluate(&disc.q, None)
+            .dice(&disc.q, None)
             .unwrap();
         println!(
             "{params:?}: attachment Dice {:.4}, voxel Dice {reference:.4}",
@@ -395,7 +395,7 @@ fn a_model_matches_its_own_rasterization() {
         };
         let v = disc
             .attachment(image.clone(), params)
-            .evaluate(&disc.q, None)
+            .dice(&disc.q, None)
             .unwrap();
         println!(
             "fat disc vs itself, {params:?}: Dice {:.4} (V {:.0}, V_img {:.0})",
@@ -426,7 +426,7 @@ fn the_real_template_against_its_own_rasterization() {
     assert!((rasterized / enclosed - 1.0).abs() < 0.02);
     let dice = model.attachment(mask.smoothed(0.2).unwrap(), DiceParams::default());
     let mut grad = vec![Vec3::zeros(); model.q.len()];
-    let v = dice.evaluate(&model.q, Some(&mut grad)).unwrap();
+    let v = dice.dice(&model.q, Some(&mut grad)).unwrap();
     println!("t001 vs itself: {v:?}");
     assert!(v.dice > 0.9, "{v:?}");
     // Shortest of repeated runs (robust to a loaded machine): CPU time of the one worker
@@ -437,10 +437,10 @@ fn the_real_template_against_its_own_rasterization() {
             .build()
             .unwrap();
         let with_grad = best_time(&pool, || {
-            dice.evaluate(&model.q, Some(&mut grad)).unwrap();
+            dice.dice(&model.q, Some(&mut grad)).unwrap();
         });
         let value_only = best_time(&pool, || {
-            dice.evaluate(&model.q, None).unwrap();
+            dice.dice(&model.q, None).unwrap();
         });
         let clock = if threads == 1 { "thread CPU" } else { "wall" };
         println!(
@@ -498,10 +498,10 @@ fn gradient_case() -> (Model, DiceAttachment, Vec<Vec3>) {
 fn gradient_matches_central_differences() {
     let (_, dice, q) = gradient_case();
     let mut grad = vec![Vec3::zeros(); q.len()];
-    let v = dice.evaluate(&q, Some(&mut grad)).unwrap();
+    let v = dice.dice(&q, Some(&mut grad)).unwrap();
     assert!(v.dice > 0.3 && v.dice < 0.95, "{v:?}");
     let h = 1e-5;
-    let value = |q: &[Vec3]| dice.evaluate(q, None).unwrap().dice;
+    let value = |q: &[Vec3]| dice.dice(q, None).unwrap().dice;
     let mut fd = vec![Vec3::zeros(); q.len()];
     for i in 0..q.len() {
         for a in 0..3 {
@@ -547,7 +547,7 @@ fn evaluation_is_identical_across_thread_counts() {
             .unwrap();
         pool.install(|| {
             let mut grad = vec![Vec3::zeros(); q.len()];
-            let v = dice.evaluate(&q, Some(&mut grad)).unwrap();
+            let v = dice.dice(&q, Some(&mut grad)).unwrap();
             (v, grad)
         })
     };
@@ -559,7 +559,7 @@ fn evaluation_is_identical_across_thread_counts() {
     assert_eq!(v1, v3);
     assert_eq!(g1, g2);
     assert_eq!(g1, g3);
-    let value_only = dice.evaluate(&q, None).unwrap();
+    let value_only = dice.dice(&q, None).unwrap();
     assert_eq!(value_only, v1);
 }
 
@@ -582,7 +582,7 @@ fn bad_models_and_inputs_are_refused() {
     );
     let mut flipped = disc.triangles.clone();
     flipped[0] = [flipped[0][0], flipped[0][2], flipped[0][1]];
-    assert!(new(&flipped, &disc.medial_of, p).contains("directed edge"));
+    assert!(new(&flipped, &disc.medial_of, p).contains("inconsistent orientation"));
     // All boundary points on one atom of the wrong side: medial triangles left unmatched.
     let mut medial_of = disc.medial_of.clone();
     medial_of[disc.triangles[0][0]] = k - 1;
@@ -611,12 +611,12 @@ fn bad_models_and_inputs_are_refused() {
     let err = DiceAttachment::new(&disc.triangles, &disc.medial_of, k, empty, p).unwrap_err();
     assert!(err.to_string().contains("no foreground"));
     let dice = disc.attachment(unit_image(), p);
-    assert!(dice.evaluate(&disc.q[1..], None).is_err());
+    assert!(dice.dice(&disc.q[1..], None).is_err());
     let mut short = vec![Vec3::zeros(); k - 1];
-    assert!(dice.evaluate(&disc.q, Some(&mut short)).is_err());
+    assert!(dice.dice(&disc.q, Some(&mut short)).is_err());
     let mut nan = disc.q.clone();
     nan[3].x = f64::NAN;
-    assert!(dice.evaluate(&nan, None).unwrap().dice.is_nan());
+    assert!(dice.dice(&nan, None).unwrap().dice.is_nan());
 }
 
 /// The cmrep sphere (radius 0.5): rasterized volume against the enclosed volume.
@@ -687,10 +687,10 @@ fn attachment_from_the_cmrep_reader() {
     .unwrap();
     let ours = t001();
     assert_eq!(template.landmark_count(), ours.q.len());
-    let theirs = dice.evaluate(template.landmarks(), None).unwrap();
+    let theirs = dice.dice(template.landmarks(), None).unwrap();
     let mine = ours
         .attachment(unit_image(), DiceParams::default())
-        .evaluate(&ours.q, None)
+        .dice(&ours.q, None)
         .unwrap();
     assert!((theirs.model_volume - mine.model_volume).abs() < 1e-6 * mine.model_volume);
 }

@@ -146,7 +146,7 @@ fn constraint_values_match_direct_formulas() {
         }
         out
     };
-    let (t1, t2) = (tangent(t.tangents().w1()), tangent(t.tangents().w2()));
+    let (t1, t2) = (tangent(&t.tangents().w1()), tangent(&t.tangents().w2()));
     let mut expected = Vec::new();
     for b in 0..nb {
         let spoke = q[b] - q[nb + t.medial_index()[b]];

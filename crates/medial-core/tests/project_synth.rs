@@ -3,14 +3,16 @@
 //! the principal axes of any template (t001).
 
 use std::path::Path;
+use std::sync::OnceLock;
 
 use medial_core::build::inflate::{inflate, MedialSheet};
 use medial_core::build::project::{project, ProjectOptions};
+use medial_core::mesh::subdivide::midpoint_subdivide;
 use medial_core::model::metrics::SpokeMetrics;
 use medial_core::model::template::MedialTemplate;
 use medial_core::synth::{
-    boundary_mesh, midpoint_subdivide, target_boundary, target_image, target_surface,
-    PrincipalAxes, Shape, SyntheticCase, Warp,
+    boundary_mesh, target_boundary, target_image, target_surface, PrincipalAxes, Shape,
+    SyntheticCase, Warp,
 };
 use medial_core::{Error, TriMesh, Vec3};
 use nalgebra::{Matrix3, Matrix4, Rotation3, Unit};
@@ -150,10 +152,21 @@ fn unreachable_tolerances_are_an_error_with_figures() {
     }
 }
 
+/// The synthetic case of `shape`, built once for all the tests that use it.
+fn synthetic_case(shape: Shape) -> &'static SyntheticCase {
+    static CASES: [OnceLock<SyntheticCase>; Shape::ALL.len()] =
+        [const { OnceLock::new() }; Shape::ALL.len()];
+    let slot = Shape::ALL
+        .iter()
+        .position(|&s| s == shape)
+        .expect("a shape of Shape::ALL");
+    CASES[slot].get_or_init(|| SyntheticCase::build(shape).expect("builds"))
+}
+
 #[test]
 fn synthetic_cases_are_medial_templates_with_the_intended_structure() {
     for shape in Shape::ALL {
-        let case = SyntheticCase::build(shape).expect("builds");
+        let case = synthetic_case(shape);
         let t = case.template();
         let h = spoke_histogram(t);
         let p = &case.projection;
@@ -204,7 +217,7 @@ fn synthetic_cases_are_medial_templates_with_the_intended_structure() {
 #[test]
 fn targets_are_the_warped_shapes() {
     for shape in Shape::ALL {
-        let case = SyntheticCase::build(shape).expect("builds");
+        let case = synthetic_case(shape);
         let boundary = case.boundary().unwrap();
         let target = case.target_surface().unwrap();
         // Midpoint subdivision keeps the surface: same volume before the warp.
@@ -247,7 +260,7 @@ fn targets_are_the_warped_shapes() {
 #[test]
 fn warps_are_orientation_preserving_on_the_templates() {
     for shape in Shape::ALL {
-        let case = SyntheticCase::build(shape).expect("builds");
+        let case = synthetic_case(shape);
         let det_a = case.warp.linear.determinant();
         let h = 1e-4;
         for p in case.template().landmarks() {
@@ -296,7 +309,7 @@ proptest! {
 fn the_warped_template_matches_the_target_image() {
     use medial_core::attachment::dice::{DiceAttachment, DiceParams};
     for shape in Shape::ALL {
-        let case = SyntheticCase::build(shape).expect("builds");
+        let case = synthetic_case(shape);
         let t = case.template();
         let image = case
             .target_image(shape.image_spacing_mm(), 2.0)
@@ -322,7 +335,7 @@ fn the_warped_template_matches_the_target_image() {
                 params,
             )
             .unwrap();
-            d.evaluate(q, None).unwrap().dice
+            d.dice(q, None).unwrap().dice
         };
         let (at_target_5, at_target_10) = (dice(5, &warped), dice(10, &warped));
         let at_template = dice(10, t.landmarks());

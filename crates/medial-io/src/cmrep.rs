@@ -14,6 +14,7 @@
 
 use std::path::Path;
 
+use medial_core::mesh::Bounds;
 use medial_core::model::metrics::SpokeMetrics;
 use medial_core::model::template::MedialTemplate;
 use medial_core::{TriMesh, Vec3};
@@ -322,7 +323,10 @@ impl<'a> Arrays<'a> {
         medial_index: &[usize],
         first: &[usize],
     ) -> Result<()> {
-        let tolerance = MEDIAL_POINT_TOLERANCE * bounding_diagonal(&self.data.points).max(1.0);
+        let tolerance = MEDIAL_POINT_TOLERANCE
+            * Bounds::of(&self.data.points)
+                .map_or(0.0, |b| b.diagonal())
+                .max(1.0);
         for (b, &m) in medial_index.iter().enumerate() {
             let b0 = first[m];
             let gap = (tuple3(points, b) - tuple3(points, b0)).norm();
@@ -365,15 +369,4 @@ impl<'a> Arrays<'a> {
 /// Tuple `i` of a 3-component array.
 fn tuple3(a: &DataArray, i: usize) -> Vec3 {
     Vec3::new(a.values[3 * i], a.values[3 * i + 1], a.values[3 * i + 2])
-}
-
-/// Length of the diagonal of the axis-aligned bounding box (0 for no points).
-fn bounding_diagonal(points: &[Vec3]) -> f64 {
-    let Some(first) = points.first() else {
-        return 0.0;
-    };
-    let (lo, hi) = points
-        .iter()
-        .fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
-    (hi - lo).norm()
 }

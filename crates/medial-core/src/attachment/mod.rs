@@ -20,10 +20,10 @@ pub trait Attachment: Sync {
     fn evaluate(&self, q: &[Vec3], grad: Option<&mut [Vec3]>) -> Result<AttachmentValue>;
 }
 
-/// `g = 1 − DSC`, `∇g = −∇DSC`.
+/// `g = 1 − DSC`, `∇g = −∇DSC`, from [`dice::DiceAttachment::dice`].
 impl Attachment for dice::DiceAttachment {
     fn evaluate(&self, q: &[Vec3], mut grad: Option<&mut [Vec3]>) -> Result<AttachmentValue> {
-        let value = dice::DiceAttachment::evaluate(self, q, grad.as_deref_mut())?;
+        let value = self.dice(q, grad.as_deref_mut())?;
         if let Some(grad) = grad {
             grad.iter_mut().for_each(|g| *g = -*g);
         }

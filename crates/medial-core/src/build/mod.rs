@@ -1,6 +1,6 @@
 //! Building templates: inflation of a medial sheet into a closed boundary with spokes
-//! ([`mod@inflate`]), and projection of a template onto its medial constraints
-//! ([`mod@project`]).
+//! ([`inflate`](mod@inflate)), and projection of a template onto its medial constraints
+//! ([`project`](mod@project)).
 
 pub mod inflate;
 pub mod project;

@@ -26,6 +26,7 @@
 //! at a feasible point, when no step is accepted, or after `max_iterations`. The result must
 //! then meet the tolerances of [`ProjectOptions`], otherwise the projection is an error.
 
+use crate::mesh::Bounds;
 use crate::model::constraints::MedialConstraints;
 use crate::model::metrics::SpokeMetrics;
 use crate::model::template::MedialTemplate;
@@ -259,34 +260,42 @@ impl Solver<'_> {
 
 /// Solves `(JJᵀ + ε·D) y = b`, `D = diag(JJᵀ)`, by conjugate gradients preconditioned with `D`
 /// (rows of `J` that are zero get `D = 1`). At most `2L + 100` iterations; stops at relative
-/// residual [`CG_TOLERANCE`].
+/// residual [`CG_TOLERANCE`]. The work vectors are allocated once, before the iterations.
 fn solve_normal_equations(jacobian: &CsMat<f64>, b: &[f64]) -> Vec<f64> {
     let diagonal: Vec<f64> = jacobian
         .outer_iterator()
         .map(|row| row.iter().map(|(_, v)| v * v).sum::<f64>())
         .map(|d| if d > 0.0 { d } else { 1.0 })
         .collect();
-    let apply = |x: &[f64]| -> Vec<f64> {
-        let jjt = mul(jacobian, &mul_transpose(jacobian, x));
-        jjt.iter()
-            .zip(x)
+    // `ap = (JJᵀ + ε·D) p`, through `jtp = Jᵀ p`.
+    let mut jtp = vec![0.0; jacobian.cols()];
+    let mut apply = |p: &[f64], ap: &mut [f64]| {
+        mul_transpose_into(jacobian, p, &mut jtp);
+        mul_into(jacobian, &jtp, ap);
+        ap.iter_mut()
+            .zip(p)
             .zip(&diagonal)
-            .map(|((a, x), d)| a + DAMPING * d * x)
-            .collect()
+            .for_each(|((a, p), d)| *a += DAMPING * d * p);
     };
-    let precondition =
-        |r: &[f64]| -> Vec<f64> { r.iter().zip(&diagonal).map(|(r, d)| r / d).collect() };
+    let precondition = |r: &[f64], z: &mut [f64]| {
+        z.iter_mut()
+            .zip(r)
+            .zip(&diagonal)
+            .for_each(|((z, r), d)| *z = r / d);
+    };
     let mut x = vec![0.0; b.len()];
     let mut r = b.to_vec();
-    let mut z = precondition(&r);
+    let mut z = vec![0.0; b.len()];
+    precondition(&r, &mut z);
     let mut p = z.clone();
+    let mut ap = vec![0.0; b.len()];
     let mut rz = dot(&r, &z);
     let stop = CG_TOLERANCE * norm(b);
     for _ in 0..2 * b.len() + 100 {
         if norm(&r) <= stop {
             break;
         }
-        let ap = apply(&p);
+        apply(&p, &mut ap);
         let curvature = dot(&p, &ap);
         if curvature <= 0.0 || !curvature.is_finite() {
             break;
@@ -294,7 +303,7 @@ fn solve_normal_equations(jacobian: &CsMat<f64>, b: &[f64]) -> Vec<f64> {
         let alpha = rz / curvature;
         axpy(alpha, &p, &mut x);
         axpy(-alpha, &ap, &mut r);
-        z = precondition(&r);
+        precondition(&r, &mut z);
         let rz_next = dot(&r, &z);
         let beta = rz_next / rz;
         rz = rz_next;
@@ -305,21 +314,34 @@ fn solve_normal_equations(jacobian: &CsMat<f64>, b: &[f64]) -> Vec<f64> {
 
 /// `J x` for a CSR matrix.
 fn mul(matrix: &CsMat<f64>, x: &[f64]) -> Vec<f64> {
-    matrix
-        .outer_iterator()
-        .map(|row| row.iter().map(|(col, v)| v * x[col]).sum())
-        .collect()
+    let mut out = vec![0.0; matrix.rows()];
+    mul_into(matrix, x, &mut out);
+    out
 }
 
-/// `Jᵀ y` for a CSR matrix (a fixed order of additions: deterministic).
+/// `out = J x` for a CSR matrix (`out` of length `J.rows()`).
+fn mul_into(matrix: &CsMat<f64>, x: &[f64], out: &mut [f64]) {
+    for (o, row) in out.iter_mut().zip(matrix.outer_iterator()) {
+        *o = row.iter().map(|(col, v)| v * x[col]).sum();
+    }
+}
+
+/// `Jᵀ y` for a CSR matrix.
 fn mul_transpose(matrix: &CsMat<f64>, y: &[f64]) -> Vec<f64> {
     let mut out = vec![0.0; matrix.cols()];
+    mul_transpose_into(matrix, y, &mut out);
+    out
+}
+
+/// `out = Jᵀ y` for a CSR matrix (`out` of length `J.cols()`; a fixed order of additions:
+/// deterministic).
+fn mul_transpose_into(matrix: &CsMat<f64>, y: &[f64], out: &mut [f64]) {
+    out.fill(0.0);
     for (row, &yr) in matrix.outer_iterator().zip(y) {
         for (col, v) in row.iter() {
             out[col] += v * yr;
         }
     }
-    out
 }
 
 fn constraint_values(constraints: &MedialConstraints, q: &[Vec3]) -> Vec<f64> {
@@ -348,19 +370,11 @@ fn max_abs_difference(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).fold(0.0, |m, (a, b)| m.max((a - b).abs()))
 }
 
-/// Diagonal of the axis-aligned bounding box of `points` (mm); 1 for a single point.
+/// Diagonal of the axis-aligned bounding box of `points` (mm); 1 when it is 0 (a single point).
 fn bounding_diagonal(points: &[Vec3]) -> f64 {
-    let Some(first) = points.first() else {
-        return 1.0;
-    };
-    let (lo, hi) = points
-        .iter()
-        .fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
-    let diagonal = (hi - lo).norm();
-    if diagonal > 0.0 {
-        diagonal
-    } else {
-        1.0
+    match Bounds::of(points).map(|b| b.diagonal()) {
+        Some(diagonal) if diagonal > 0.0 => diagonal,
+        _ => 1.0,
     }
 }
 

@@ -10,12 +10,12 @@
 //! on the surface itself, for any closed mesh (orientation and self-intersections do not
 //! matter: crossing parity).
 
-use std::collections::HashMap;
-
 use nalgebra::Matrix4;
 use rayon::prelude::*;
 
-use crate::image::volume::Volume;
+use crate::image::volume::{check_affine, voxel_count, Volume};
+use crate::mesh::topology::{check_edges, MeshDefect, Orientation};
+use crate::mesh::Bounds;
 use crate::{Error, Result, TriMesh, Vec3};
 
 /// Rasterizes the closed mesh `mesh` on the grid `dims`, `voxel_to_world`: 1 at voxel centres
@@ -23,8 +23,8 @@ use crate::{Error, Result, TriMesh, Vec3};
 /// triangles, and an invalid grid (see [`Volume::new`]). Parallel over `k` slices, deterministic.
 pub fn rasterize(mesh: &TriMesh, dims: [usize; 3], voxel_to_world: Matrix4<f64>) -> Result<Volume> {
     check_closed(mesh.triangles())?;
-    let empty = Volume::new(dims, vec![0.0; dims.iter().product()], voxel_to_world)?;
-    let to_voxel = empty.world_to_voxel();
+    voxel_count(dims)?;
+    let to_voxel = check_affine(&voxel_to_world)?;
     let points: Vec<Vec3> = mesh
         .points()
         .iter()
@@ -77,14 +77,10 @@ pub fn grid_around(
             "grid margin must be a finite number of mm ≥ 0, got {margin_mm}"
         )));
     }
-    let first = mesh.points().first().ok_or_else(|| {
+    let bounds = Bounds::of(mesh.points()).ok_or_else(|| {
         Error::InvalidMesh("cannot build a grid around a mesh without points".into())
     })?;
-    let (lo, hi) = mesh
-        .points()
-        .iter()
-        .fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
-    let extent = hi - lo + Vec3::repeat(2.0 * margin_mm);
+    let extent = bounds.extent() + Vec3::repeat(2.0 * margin_mm);
     let steps = extent.map(|e| (e / spacing_mm).ceil());
     if steps.iter().any(|&s| s > 1e7) {
         return Err(Error::InvalidParameter(format!(
@@ -93,37 +89,41 @@ pub fn grid_around(
         )));
     }
     let dims = [0, 1, 2].map(|a| steps[a] as usize + 1);
-    let origin = (lo + hi) / 2.0 - steps * (spacing_mm / 2.0);
+    let origin = bounds.centre() - steps * (spacing_mm / 2.0);
     let mut m = Matrix4::new_scaling(spacing_mm);
     m[(3, 3)] = 1.0;
     m.fixed_view_mut::<3, 1>(0, 3).copy_from(&origin);
     Ok((dims, m))
 }
 
-/// Refuses a mesh without triangles or with an edge used by other than two triangles.
+/// Refuses a mesh without triangles or with an edge used by other than two triangles (in
+/// either direction: crossing parity does not need an orientation).
 fn check_closed(triangles: &[[usize; 3]]) -> Result<()> {
     if triangles.is_empty() {
         return Err(Error::InvalidMesh(
             "cannot rasterize a mesh without triangles".into(),
         ));
     }
-    let mut uses: HashMap<(usize, usize), usize> = HashMap::new();
-    for t in triangles {
-        for e in 0..3 {
-            let (a, b) = (t[e], t[(e + 1) % 3]);
-            *uses.entry((a.min(b), a.max(b))).or_default() += 1;
-        }
-    }
-    let mut bad: Vec<_> = uses.into_iter().filter(|&(_, n)| n != 2).collect();
-    bad.sort_unstable();
-    match bad.first() {
-        None => Ok(()),
-        Some(&((a, b), n)) => Err(Error::InvalidMesh(format!(
-            "cannot rasterize an open or non-manifold mesh: edge ({a}, {b}) is used by {n} \
-             triangle(s) instead of 2 ({} such edges)",
-            bad.len()
-        ))),
-    }
+    let (a, b, uses, problem_edges) = match check_edges(triangles, Orientation::Any) {
+        Ok(()) => return Ok(()),
+        Err(MeshDefect::OpenEdge {
+            a,
+            b,
+            problem_edges,
+            ..
+        }) => (a, b, 1, problem_edges),
+        Err(MeshDefect::NonManifoldEdge {
+            a,
+            b,
+            triangles,
+            problem_edges,
+        }) => (a, b, triangles.len(), problem_edges),
+        Err(other) => return Err(other.into()),
+    };
+    Err(Error::InvalidMesh(format!(
+        "cannot rasterize an open or non-manifold mesh: edge ({a}, {b}) is used by {uses} \
+         triangle(s) instead of 2 ({problem_edges} such edges)"
+    )))
 }
 
 /// For each slice `k`, the triangles whose `k` range (in voxel coordinates) contains `k`.

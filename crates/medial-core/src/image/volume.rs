@@ -32,15 +32,7 @@ impl Volume {
     /// matrix, a last row other than `0 0 0 1`, and a singular or nearly flat 3×3 part (a zero
     /// column or `|det| < 1e-10 · Π |column|`).
     pub fn new(dims: [usize; 3], data: Vec<f64>, voxel_to_world: Matrix4<f64>) -> Result<Self> {
-        if dims.contains(&0) {
-            return Err(Error::InvalidVolume(format!(
-                "empty grid: dimensions {dims:?}"
-            )));
-        }
-        let count = dims[0]
-            .checked_mul(dims[1])
-            .and_then(|n| n.checked_mul(dims[2]))
-            .ok_or_else(|| Error::InvalidVolume(format!("grid {dims:?} is too large")))?;
+        let count = voxel_count(dims)?;
         if data.len() != count {
             return Err(Error::ShapeMismatch {
                 what: format!(
@@ -257,8 +249,21 @@ fn linear_part(m: &Matrix4<f64>) -> Matrix3<f64> {
     m.fixed_view::<3, 3>(0, 0).into_owned()
 }
 
+/// `nx·ny·nz`, refusing a zero dimension and a count that overflows.
+pub(crate) fn voxel_count(dims: [usize; 3]) -> Result<usize> {
+    if dims.contains(&0) {
+        return Err(Error::InvalidVolume(format!(
+            "empty grid: dimensions {dims:?}"
+        )));
+    }
+    dims[0]
+        .checked_mul(dims[1])
+        .and_then(|n| n.checked_mul(dims[2]))
+        .ok_or_else(|| Error::InvalidVolume(format!("grid {dims:?} is too large")))
+}
+
 /// Checks that `m` is a finite, non-degenerate affine map and returns its inverse.
-fn check_affine(m: &Matrix4<f64>) -> Result<Matrix4<f64>> {
+pub(crate) fn check_affine(m: &Matrix4<f64>) -> Result<Matrix4<f64>> {
     if !m.iter().all(|c| c.is_finite()) {
         return Err(Error::NonFinite(format!("voxel-to-world matrix {m}")));
     }

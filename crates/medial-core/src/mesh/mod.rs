@@ -1,6 +1,11 @@
-//! Triangle meshes: the point type, [`TriMesh`], and their topology ([`topology`]).
+//! Triangle meshes: the point type, [`TriMesh`], their bounding boxes ([`Bounds`]), midpoint
+//! subdivision ([`subdivide`]) and their topology ([`topology`]).
 
+pub mod bounds;
+pub mod subdivide;
 pub mod topology;
+
+pub use bounds::Bounds;
 
 use crate::{Error, Result};
 
@@ -17,7 +22,8 @@ pub struct TriMesh {
 }
 
 impl TriMesh {
-    /// Builds a mesh, refusing out-of-range or repeated corner indices and non-finite points.
+    /// Builds a mesh, refusing non-finite points (`NonFinite`) and out-of-range or repeated
+    /// corner indices (`Mesh`, see [`topology::check_corners`]).
     pub fn new(points: Vec<Vec3>, triangles: Vec<[usize; 3]>) -> Result<Self> {
         if let Some(i) = points.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
             return Err(Error::NonFinite(format!(
@@ -25,19 +31,7 @@ impl TriMesh {
                 points[i].as_slice()
             )));
         }
-        for (t, tri) in triangles.iter().enumerate() {
-            if let Some(&v) = tri.iter().find(|&&v| v >= points.len()) {
-                return Err(Error::InvalidMesh(format!(
-                    "triangle {t} uses point {v} but the mesh has {} points",
-                    points.len()
-                )));
-            }
-            if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
-                return Err(Error::InvalidMesh(format!(
-                    "triangle {t} repeats a corner: {tri:?}"
-                )));
-            }
-        }
+        topology::check_corners(points.len(), &triangles)?;
         Ok(Self { points, triangles })
     }
 

@@ -12,8 +12,8 @@
 //! counter-clockwise about the outward normal, `n̂_b` points outward. Border vertices of open
 //! meshes would need Loop's border rule; medial templates are closed, so open meshes are refused.
 
-use crate::mesh::topology::vertex_rings;
-use crate::{Error, Result, Vec3};
+use crate::mesh::topology::MeshDefect;
+use crate::Vec3;
 use sprs::{CsMat, TriMat};
 
 /// The weights of one row of `W¹` and `W²`, in ring order.
@@ -27,7 +27,8 @@ pub struct Stencil<'a> {
     pub w2: &'a [f64],
 }
 
-/// The sparse `nb × nb` Loop tangent operators `W¹`, `W²` of a closed boundary mesh.
+/// The sparse `nb × nb` Loop tangent operators `W¹`, `W²` of a closed boundary mesh, stored
+/// as their rows ([`Stencil`]).
 #[derive(Clone, Debug)]
 pub struct LoopTangents {
     /// Ring of vertex `b`: `neighbours[offsets[b]..offsets[b + 1]]`.
@@ -35,26 +36,23 @@ pub struct LoopTangents {
     neighbours: Vec<usize>,
     cos: Vec<f64>,
     sin: Vec<f64>,
-    w1: CsMat<f64>,
-    w2: CsMat<f64>,
 }
 
 impl LoopTangents {
-    /// Builds `W¹`, `W²` for the closed, consistently oriented mesh with `n_points` vertices and
-    /// the given triangles. Refuses (with the vertex named) anything
-    /// [`vertex_rings`] refuses, and vertices of valence below 3 (no tangent plane).
-    pub fn new(n_points: usize, triangles: &[[usize; 3]]) -> Result<Self> {
-        let rings = vertex_rings(n_points, triangles)?;
+    /// Builds `W¹`, `W²` from the one-rings of the vertices of a closed, consistently oriented
+    /// mesh, as [`crate::mesh::topology::vertex_rings`] walks them. Refuses a vertex of valence
+    /// below 3 (no tangent plane), naming it ([`MeshDefect::LowValence`]).
+    pub fn new(rings: &[Vec<usize>]) -> Result<Self, MeshDefect> {
         if let Some((v, ring)) = rings.iter().enumerate().find(|(_, r)| r.len() < 3) {
-            return Err(Error::InvalidMesh(format!(
-                "vertex {v} has valence {} (neighbours {ring:?}); Loop tangents need at least 3",
-                ring.len()
-            )));
+            return Err(MeshDefect::LowValence {
+                vertex: v,
+                ring: ring.clone(),
+            });
         }
-        let mut offsets = Vec::with_capacity(n_points + 1);
+        let mut offsets = Vec::with_capacity(rings.len() + 1);
         offsets.push(0);
         let (mut neighbours, mut cos, mut sin) = (Vec::new(), Vec::new(), Vec::new());
-        for ring in &rings {
+        for ring in rings {
             let n = ring.len() as f64;
             for (j, &v) in ring.iter().enumerate() {
                 let angle = std::f64::consts::TAU * j as f64 / n;
@@ -64,15 +62,11 @@ impl LoopTangents {
             }
             offsets.push(neighbours.len());
         }
-        let w1 = sparse_rows(n_points, &offsets, &neighbours, &cos);
-        let w2 = sparse_rows(n_points, &offsets, &neighbours, &sin);
         Ok(Self {
             offsets,
             neighbours,
             cos,
             sin,
-            w1,
-            w2,
         })
     }
 
@@ -86,14 +80,16 @@ impl LoopTangents {
         self.len() == 0
     }
 
-    /// `W¹` (CSR, `nb × nb`): entry `(b, v_j) = cos(2πj/n_b)`.
-    pub fn w1(&self) -> &CsMat<f64> {
-        &self.w1
+    /// `W¹` as a sparse matrix (CSR, `nb × nb`, built on each call): entry
+    /// `(b, v_j) = cos(2πj/n_b)`.
+    pub fn w1(&self) -> CsMat<f64> {
+        self.sparse(&self.cos)
     }
 
-    /// `W²` (CSR, `nb × nb`): entry `(b, v_j) = sin(2πj/n_b)`.
-    pub fn w2(&self) -> &CsMat<f64> {
-        &self.w2
+    /// `W²` as a sparse matrix (CSR, `nb × nb`, built on each call): entry
+    /// `(b, v_j) = sin(2πj/n_b)`.
+    pub fn w2(&self) -> CsMat<f64> {
+        self.sparse(&self.sin)
     }
 
     /// Row `b` of both operators, in ring order. Panics if `b ≥ nb`.
@@ -143,6 +139,20 @@ impl LoopTangents {
             .collect()
     }
 
+    /// The `nb × nb` CSR matrix with row `b` holding `values[offsets[b]..offsets[b+1]]` at the
+    /// columns of its ring.
+    fn sparse(&self, values: &[f64]) -> CsMat<f64> {
+        let n = self.len();
+        let mut triplets = TriMat::with_capacity((n, n), self.neighbours.len());
+        for (b, w) in self.offsets.windows(2).enumerate() {
+            let range = w[0]..w[1];
+            for (&v, &value) in self.neighbours[range.clone()].iter().zip(&values[range]) {
+                triplets.add_triplet(b, v, value);
+            }
+        }
+        triplets.to_csr()
+    }
+
     fn check_len(&self, q: &[Vec3]) {
         assert!(
             q.len() >= self.len(),
@@ -153,28 +163,17 @@ impl LoopTangents {
     }
 }
 
-/// A CSR matrix `n × n` with row `b` holding `values[offsets[b]..offsets[b+1]]` at columns
-/// `columns[…]` (distinct within a row).
-fn sparse_rows(n: usize, offsets: &[usize], columns: &[usize], values: &[f64]) -> CsMat<f64> {
-    let mut triplets = TriMat::with_capacity((n, n), columns.len());
-    for (b, w) in offsets.windows(2).enumerate() {
-        for i in w[0]..w[1] {
-            triplets.add_triplet(b, columns[i], values[i]);
-        }
-    }
-    triplets.to_csr()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::topology::vertex_rings;
     use crate::testing::meshes::octahedron;
     use approx::assert_relative_eq;
 
     #[test]
     fn octahedron_normals_are_radial() {
         let (p, t) = octahedron();
-        let lt = LoopTangents::new(6, &t).expect("closed");
+        let lt = LoopTangents::new(&vertex_rings(6, &t).unwrap()).expect("valence 4");
         for (b, n) in lt.normals(&p).iter().enumerate() {
             assert_relative_eq!(*n, p[b], epsilon = 1e-12);
         }
@@ -187,13 +186,13 @@ mod tests {
     #[test]
     fn sparse_matrices_match_stencils() {
         let (p, t) = octahedron();
-        let lt = LoopTangents::new(6, &t).expect("closed");
+        let lt = LoopTangents::new(&vertex_rings(6, &t).unwrap()).expect("valence 4");
         assert_eq!(lt.w1().shape(), (6, 6));
         let (t1, t2) = lt.tangents(&p);
         for c in 0..3 {
             let x: Vec<f64> = p.iter().map(|v| v[c]).collect();
-            let y1 = lt.w1() * &sprs::CsVec::new(6, (0..6).collect(), x.clone());
-            let y2 = lt.w2() * &sprs::CsVec::new(6, (0..6).collect(), x);
+            let y1 = &lt.w1() * &sprs::CsVec::new(6, (0..6).collect(), x.clone());
+            let y2 = &lt.w2() * &sprs::CsVec::new(6, (0..6).collect(), x);
             for b in 0..6 {
                 assert_relative_eq!(y1.get(b).copied().unwrap_or(0.0), t1[b][c], epsilon = 1e-12);
                 assert_relative_eq!(y2.get(b).copied().unwrap_or(0.0), t2[b][c], epsilon = 1e-12);
@@ -202,10 +201,16 @@ mod tests {
     }
 
     #[test]
-    fn open_mesh_is_refused() {
-        let (_, mut t) = octahedron();
-        t.pop();
-        let err = LoopTangents::new(6, &t).expect_err("open");
-        assert!(err.to_string().contains("border"), "{err}");
+    fn low_valence_is_refused() {
+        let rings = vec![vec![1, 2, 3], vec![0, 2], vec![0, 1, 3], vec![0, 1, 2]];
+        let err = LoopTangents::new(&rings).expect_err("valence 2");
+        assert_eq!(
+            err,
+            MeshDefect::LowValence {
+                vertex: 1,
+                ring: vec![0, 2]
+            }
+        );
+        assert!(err.to_string().contains("vertex 1 has valence 2"), "{err}");
     }
 }

@@ -35,7 +35,8 @@ impl MedialTemplate {
     /// `medial_points[m]` of every atom.
     ///
     /// Refused, with a message saying what and where: a boundary that is open, non-manifold,
-    /// pinched, inconsistently oriented or inward oriented (`InvalidMesh`); a `medial_index` of
+    /// pinched, inconsistently oriented or inward oriented, or has a vertex of valence below 3
+    /// (`Mesh`); a `medial_index` of
     /// the wrong length (`ShapeMismatch`); a medial index out of range, an atom with no spoke or
     /// more than [`MAX_SPOKES`] spokes (`InvalidTemplate`); a non-finite medial point
     /// (`NonFinite`).
@@ -44,7 +45,7 @@ impl MedialTemplate {
         medial_index: Vec<usize>,
         medial_points: Vec<Vec3>,
     ) -> Result<Self> {
-        check_closed_oriented_manifold(&boundary)?;
+        let rings = check_closed_oriented_manifold(&boundary)?;
         check_outward(&boundary)?;
         let (mut landmarks, triangles) = boundary.into_parts();
         let nb = landmarks.len();
@@ -57,7 +58,7 @@ impl MedialTemplate {
         }
         check_finite("medial point", &medial_points)?;
         let (spoke_offsets, spoke_list) = spokes_of_atoms(&medial_index, medial_points.len())?;
-        let tangents = LoopTangents::new(nb, &triangles)?;
+        let tangents = LoopTangents::new(&rings)?;
         let medial_triangles = medial_triangles(&triangles, &medial_index);
         landmarks.extend(medial_points);
         Ok(Self {

@@ -1,0 +1,135 @@
+//! **Parallelism.** Triangles are cut into fixed chunks; each chunk sums into its own
+//! accumulators, which are then added in chunk order: the result is the same, bit for bit,
+//! whatever the number of threads.
+
+use super::prism::prism_volume;
+use super::{DiceAttachment, Ends, Sample};
+use crate::Vec3;
+
+/// Partial sums of one chunk of triangles.
+pub(super) struct ChunkSums {
+    pub(super) volume: f64,
+    pub(super) overlap: f64,
+    pub(super) negative: f64,
+    /// `∂O/∂q` and `∂V/∂q` (empty when no gradient is wanted).
+    pub(super) grad_overlap: Vec<Vec3>,
+    pub(super) grad_volume: Vec<Vec3>,
+}
+
+impl DiceAttachment {
+    pub(super) fn chunk_sums(
+        &self,
+        tris: &[usize],
+        ends: &[Ends],
+        samples: &[Sample],
+        want_grad: bool,
+    ) -> ChunkSums {
+        let mut sums = ChunkSums::zero(if want_grad { self.landmark_count } else { 0 });
+        for &t in tris {
+            self.triangle_sums(t, ends, samples, want_grad, &mut sums);
+        }
+        sums
+    }
+
+    /// Adds the prisms over subdivided triangle `t` (all layers) to `sums`.
+    fn triangle_sums(
+        &self,
+        t: usize,
+        ends: &[Ends],
+        samples: &[Sample],
+        want_grad: bool,
+        sums: &mut ChunkSums,
+    ) {
+        let nv = self.stencils.len();
+        let tri = self.triangles[t];
+        let ends = tri.map(|v| &ends[v]);
+        let mut vertex = VertexGradients::default();
+        for i in 0..self.layers {
+            let (s_lower, s_upper) = (self.sheet(i), self.sheet(i + 1));
+            let x = std::array::from_fn(|n| {
+                if n < 3 {
+                    ends[n].at(s_lower)
+                } else {
+                    ends[n - 3].at(s_upper)
+                }
+            });
+            let (vol, dvol) = prism_volume(&x, self.faces[t].as_slice());
+            let mid = tri.map(|v| &samples[i * nv + v]);
+            let mean_f = mid.iter().map(|s| s.f).sum::<f64>() / 3.0;
+            sums.volume += vol;
+            sums.overlap += vol * mean_f;
+            sums.negative += vol.min(0.0);
+            if want_grad {
+                for j in 0..3 {
+                    vertex.add(j, s_lower, mean_f * dvol[j], dvol[j]);
+                    vertex.add(j, s_upper, mean_f * dvol[j + 3], dvol[j + 3]);
+                    vertex.add(
+                        j,
+                        s_lower + self.half_layer(),
+                        vol / 3.0 * mid[j].grad_f,
+                        Vec3::zeros(),
+                    );
+                }
+            }
+        }
+        if want_grad {
+            for (j, &v) in tri.iter().enumerate() {
+                self.stencils[v].scatter(&vertex.overlap[j], &mut sums.grad_overlap);
+                self.stencils[v].scatter(&vertex.volume[j], &mut sums.grad_volume);
+            }
+        }
+    }
+}
+
+/// `∂O` and `∂V` with respect to the boundary (`[j][0]`) and medial (`[j][1]`) points of the
+/// three vertices `j` of a subdivided triangle.
+#[derive(Clone, Copy, Debug)]
+struct VertexGradients {
+    overlap: [[Vec3; 2]; 3],
+    volume: [[Vec3; 2]; 3],
+}
+
+impl Default for VertexGradients {
+    fn default() -> Self {
+        Self {
+            overlap: [[Vec3::zeros(); 2]; 3],
+            volume: [[Vec3::zeros(); 2]; 3],
+        }
+    }
+}
+
+impl VertexGradients {
+    /// Adds `∂O/∂x` and `∂V/∂x` at the point `x = (1 − s) b + s m` above vertex `j`.
+    fn add(&mut self, j: usize, s: f64, d_overlap: Vec3, d_volume: Vec3) {
+        self.overlap[j][0] += (1.0 - s) * d_overlap;
+        self.overlap[j][1] += s * d_overlap;
+        self.volume[j][0] += (1.0 - s) * d_volume;
+        self.volume[j][1] += s * d_volume;
+    }
+}
+
+impl ChunkSums {
+    pub(super) fn zero(gradient_len: usize) -> Self {
+        Self {
+            volume: 0.0,
+            overlap: 0.0,
+            negative: 0.0,
+            grad_overlap: vec![Vec3::zeros(); gradient_len],
+            grad_volume: vec![Vec3::zeros(); gradient_len],
+        }
+    }
+
+    /// `self + other` (used in chunk order).
+    pub(super) fn add(mut self, other: Self) -> Self {
+        self.volume += other.volume;
+        self.overlap += other.overlap;
+        self.negative += other.negative;
+        for (a, b) in self.grad_overlap.iter_mut().zip(&other.grad_overlap) {
+            *a += b;
+        }
+        for (a, b) in self.grad_volume.iter_mut().zip(&other.grad_volume) {
+            *a += b;
+        }
+        self
+    }
+}

@@ -1,0 +1,183 @@
+//! Medial sheets: validation on construction and Loop subdivision with creases.
+
+use std::collections::HashMap;
+
+use super::edges::{edge_key, Crease, Edges};
+use super::geometry::{corners, is_degenerate};
+use crate::{Error, Result, TriMesh, Vec3};
+
+/// A medial sheet: a triangle mesh, possibly non-manifold (an edge in three triangles is a seam),
+/// with a radius per vertex (mm).
+///
+/// Validated on construction: radii finite and positive, every point in a triangle, no
+/// degenerate or repeated triangle, no edge in more than three triangles.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MedialSheet {
+    mesh: TriMesh,
+    radius: Vec<f64>,
+}
+
+impl MedialSheet {
+    /// Builds a sheet from medial points (mm), triangles and one radius per point (mm).
+    ///
+    /// Refuses non-finite points or radii, radii `≤ 0`, out-of-range or repeated corners,
+    /// degenerate triangles (`|e₁ × e₂| ≤ 10⁻¹² · (longest edge)²`), two triangles on the same
+    /// three points, edges in more than three triangles, and points used by no triangle.
+    pub fn new(points: Vec<Vec3>, triangles: Vec<[usize; 3]>, radius: Vec<f64>) -> Result<Self> {
+        if radius.len() != points.len() {
+            return Err(Error::ShapeMismatch {
+                what: "medial sheet radii (one per point)".into(),
+                expected: points.len(),
+                found: radius.len(),
+            });
+        }
+        check_radii(&radius)?;
+        if triangles.is_empty() {
+            return Err(Error::InvalidMesh(
+                "a medial sheet needs at least one triangle".into(),
+            ));
+        }
+        let mesh = TriMesh::new(points, triangles)?;
+        check_non_degenerate(&mesh)?;
+        check_all_points_used(&mesh)?;
+        check_distinct_triangles(mesh.triangles())?;
+        Edges::new(mesh.triangles()).check_at_most_seams()?;
+        Ok(Self { mesh, radius })
+    }
+
+    /// One level of Loop subdivision that keeps free edges and seams as creases.
+    ///
+    /// The new points are the old vertices (moved), in their order, followed by one point per
+    /// edge in ascending `(a, b)`, `a < b`. Each triangle `(a, b, c)` becomes
+    /// `(a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca)` in this order (orientation kept).
+    ///
+    /// - Edge point: `3/8 (a + b) + 1/8 (c + d)` on an edge in two triangles with opposite
+    ///   vertices `c, d`; `1/2 (a + b)` on a crease (free edge or seam).
+    /// - Vertex with no crease edge or one: Loop's rule `(1 − nβ) v + β Σ neighbours`,
+    ///   `β = (5/8 − (3/8 + cos(2π/n)/4)²)/n`, over its `n` neighbours.
+    /// - Vertex on one crease curve (two crease edges of the same kind):
+    ///   `3/4 v + 1/8 (p + q)` with `p, q` its neighbours along the crease.
+    /// - Corner (crease curves meet, or a free edge meets a seam): fixed.
+    ///
+    /// The radius is subdivided with the same weights (all positive, so radii stay positive).
+    pub fn loop_subdivide(&self) -> Result<Self> {
+        let edges = Edges::new(self.triangles());
+        let n = self.points().len();
+        let neighbours = edges.neighbours(n);
+        let creases = edges.creases(n);
+        let mut stencils: Vec<Vec<(usize, f64)>> = (0..n)
+            .map(|v| vertex_stencil(v, &neighbours[v], &creases[v]))
+            .collect();
+        stencils.extend((0..edges.len()).map(|e| edges.edge_stencil(e, self.triangles())));
+        let points = stencils.iter().map(|s| combine(s, self.points())).collect();
+        let radius = stencils
+            .iter()
+            .map(|s| s.iter().map(|&(i, w)| w * self.radius[i]).sum())
+            .collect();
+        let mid = |a: usize, b: usize| n + edges.index[&edge_key(a, b)];
+        let triangles = self
+            .triangles()
+            .iter()
+            .flat_map(|&[a, b, c]| {
+                let (ab, bc, ca) = (mid(a, b), mid(b, c), mid(c, a));
+                [[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]
+            })
+            .collect();
+        Self::new(points, triangles, radius)
+    }
+
+    /// The medial points (mm).
+    pub fn points(&self) -> &[Vec3] {
+        self.mesh.points()
+    }
+
+    /// The triangles, as corner indices into [`Self::points`].
+    pub fn triangles(&self) -> &[[usize; 3]] {
+        self.mesh.triangles()
+    }
+
+    /// The radius of every medial point (mm).
+    pub fn radius(&self) -> &[f64] {
+        &self.radius
+    }
+}
+
+pub(super) fn check_radii(radius: &[f64]) -> Result<()> {
+    if let Some(m) = radius.iter().position(|r| !r.is_finite()) {
+        return Err(Error::NonFinite(format!(
+            "radius of medial point {m} is {}",
+            radius[m]
+        )));
+    }
+    if let Some(m) = radius.iter().position(|&r| r <= 0.0) {
+        return Err(Error::InvalidTemplate(format!(
+            "radius of medial point {m} is {} mm; radii must be positive",
+            radius[m]
+        )));
+    }
+    Ok(())
+}
+
+pub(super) fn check_non_degenerate(mesh: &TriMesh) -> Result<()> {
+    for (t, tri) in mesh.triangles().iter().enumerate() {
+        let p = corners(mesh.points(), tri);
+        if is_degenerate(&p) {
+            return Err(Error::InvalidMesh(format!(
+                "medial triangle {t} {tri:?} is degenerate (its corners are collinear)"
+            )));
+        }
+    }
+    Ok(())
+}
+
+pub(super) fn check_all_points_used(mesh: &TriMesh) -> Result<()> {
+    let mut used = vec![false; mesh.points().len()];
+    mesh.triangles()
+        .iter()
+        .flatten()
+        .for_each(|&v| used[v] = true);
+    match used.iter().position(|u| !u) {
+        Some(m) => Err(Error::InvalidMesh(format!(
+            "medial point {m} is in no triangle"
+        ))),
+        None => Ok(()),
+    }
+}
+
+pub(super) fn check_distinct_triangles(triangles: &[[usize; 3]]) -> Result<()> {
+    let mut seen = HashMap::new();
+    for (t, tri) in triangles.iter().enumerate() {
+        let mut key = *tri;
+        key.sort_unstable();
+        if let Some(first) = seen.insert(key, t) {
+            return Err(Error::InvalidMesh(format!(
+                "medial triangles {first} and {t} both join points {key:?}"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Loop's vertex stencil (see [`MedialSheet::loop_subdivide`]).
+pub(super) fn vertex_stencil(
+    v: usize,
+    neighbours: &[usize],
+    creases: &[(usize, Crease)],
+) -> Vec<(usize, f64)> {
+    match creases {
+        [] | [_] => {
+            let n = neighbours.len() as f64;
+            let c = 0.375 + 0.25 * (2.0 * std::f64::consts::PI / n).cos();
+            let beta = (0.625 - c * c) / n;
+            std::iter::once((v, 1.0 - n * beta))
+                .chain(neighbours.iter().map(|&u| (u, beta)))
+                .collect()
+        }
+        [(p, kp), (q, kq)] if kp == kq => vec![(v, 0.75), (*p, 0.125), (*q, 0.125)],
+        _ => vec![(v, 1.0)],
+    }
+}
+
+pub(super) fn combine(stencil: &[(usize, f64)], points: &[Vec3]) -> Vec3 {
+    stencil.iter().map(|&(i, w)| w * points[i]).sum()
+}

@@ -1,0 +1,306 @@
+//! SIMD lanes: lane-wise IEEE arithmetic on [`super::LANES`] numbers at once, portable or on
+//! AVX2 with fused multiply-adds, and the choice between them at run time ([`Isa`]).
+
+use std::ops::{Mul, Sub};
+
+/// Lane-wise IEEE arithmetic on `f64`: a scalar or a SIMD vector. The multiply-adds are
+/// rounded once by implementations with fused multiply-adds and twice by the others; each
+/// implementation always gives the same bits for the same operands.
+pub(crate) trait Real: Copy + Sub<Output = Self> + Mul<Output = Self> {
+    /// `x` in every lane.
+    fn splat(x: f64) -> Self;
+    /// `hi` in the lanes where `self > hi`, else `self` (NaN stays NaN).
+    fn at_most(self, hi: f64) -> Self;
+    /// Per lane, with `b` the bits of the lane: `f64::from_bits((b + 1023) << 52)`.
+    fn exponent_scale(self) -> Self;
+    /// `self·a + b`, rounded once where the implementation has fused multiply-adds.
+    fn mul_add(self, a: Self, b: Self) -> Self;
+    /// `b − self·a`, rounded once where the implementation has fused multiply-adds.
+    fn neg_mul_add(self, a: Self, b: Self) -> Self;
+    /// `−self·a − b`, rounded once where the implementation has fused multiply-adds.
+    fn neg_mul_sub(self, a: Self, b: Self) -> Self;
+}
+
+/// [`super::LANES`] lanes of `f64`.
+pub(crate) trait F64x4: Real {
+    /// `v[0 … 3]`.
+    fn load(v: &[f64]) -> Self;
+    /// `v[0 … 3] = self`.
+    fn store(self, v: &mut [f64]);
+
+    /// The lanes as an array.
+    #[inline(always)]
+    fn to_array(self) -> [f64; 4] {
+        let mut a = [0.0; 4];
+        self.store(&mut a);
+        a
+    }
+
+    /// Lanes from an array.
+    #[inline(always)]
+    fn from_array(a: [f64; 4]) -> Self {
+        Self::load(&a)
+    }
+
+    /// `v[0 … 3] += self·a` (see [`Real::mul_add`]).
+    #[inline(always)]
+    fn mul_add_to(self, a: Self, v: &mut [f64]) {
+        self.mul_add(a, Self::load(v)).store(v);
+    }
+
+    /// `v[0 … 3] −= self·a` (see [`Real::neg_mul_add`]).
+    #[inline(always)]
+    fn neg_mul_add_to(self, a: Self, v: &mut [f64]) {
+        self.neg_mul_add(a, Self::load(v)).store(v);
+    }
+
+    /// The sum of the lanes in a fixed order: `(l0 + l1) + (l2 + l3)`.
+    #[inline(always)]
+    fn sum(self) -> f64 {
+        let l = self.to_array();
+        (l[0] + l[1]) + (l[2] + l[3])
+    }
+}
+
+impl Real for f64 {
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        x
+    }
+
+    #[inline(always)]
+    fn at_most(self, hi: f64) -> Self {
+        if self > hi {
+            hi
+        } else {
+            self
+        }
+    }
+
+    #[inline(always)]
+    fn exponent_scale(self) -> Self {
+        f64::from_bits(self.to_bits().wrapping_add(1023) << 52)
+    }
+
+    /// Two roundings: `f64::mul_add` would call a slow software routine on CPUs without FMA.
+    #[inline(always)]
+    fn mul_add(self, a: Self, b: Self) -> Self {
+        self * a + b
+    }
+
+    #[inline(always)]
+    fn neg_mul_add(self, a: Self, b: Self) -> Self {
+        b - self * a
+    }
+
+    #[inline(always)]
+    fn neg_mul_sub(self, a: Self, b: Self) -> Self {
+        -(self * a) - b
+    }
+}
+
+/// Four lanes in an array, for any CPU.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Portable([f64; 4]);
+
+impl Portable {
+    /// `f` lane by lane.
+    #[inline(always)]
+    fn map(self, f: impl Fn(f64) -> f64) -> Self {
+        Self(self.0.map(f))
+    }
+
+    /// `f` lane by lane on two operands.
+    #[inline(always)]
+    fn zip(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
+        self.zip3(other, other, |x, y, _| f(x, y))
+    }
+
+    /// `f` lane by lane on three operands.
+    #[inline(always)]
+    fn zip3(self, a: Self, b: Self, f: impl Fn(f64, f64, f64) -> f64) -> Self {
+        let mut out = self.0;
+        for (l, x) in out.iter_mut().enumerate() {
+            *x = f(*x, a.0[l], b.0[l]);
+        }
+        Self(out)
+    }
+}
+
+impl Sub for Portable {
+    type Output = Self;
+    #[inline(always)]
+    fn sub(self, other: Self) -> Self {
+        self.zip(other, |x, y| x - y)
+    }
+}
+
+impl Mul for Portable {
+    type Output = Self;
+    #[inline(always)]
+    fn mul(self, other: Self) -> Self {
+        self.zip(other, |x, y| x * y)
+    }
+}
+
+impl Real for Portable {
+    #[inline(always)]
+    fn splat(x: f64) -> Self {
+        Self([x; 4])
+    }
+
+    #[inline(always)]
+    fn at_most(self, hi: f64) -> Self {
+        self.map(|x| x.at_most(hi))
+    }
+
+    #[inline(always)]
+    fn exponent_scale(self) -> Self {
+        self.map(f64::exponent_scale)
+    }
+
+    #[inline(always)]
+    fn mul_add(self, a: Self, b: Self) -> Self {
+        self.zip3(a, b, <f64 as Real>::mul_add)
+    }
+
+    #[inline(always)]
+    fn neg_mul_add(self, a: Self, b: Self) -> Self {
+        self.zip3(a, b, <f64 as Real>::neg_mul_add)
+    }
+
+    #[inline(always)]
+    fn neg_mul_sub(self, a: Self, b: Self) -> Self {
+        self.zip3(a, b, <f64 as Real>::neg_mul_sub)
+    }
+}
+
+impl F64x4 for Portable {
+    #[inline(always)]
+    fn load(v: &[f64]) -> Self {
+        let mut a = [0.0; 4];
+        a.copy_from_slice(&v[..4]);
+        Self(a)
+    }
+
+    #[inline(always)]
+    fn store(self, v: &mut [f64]) {
+        v[..4].copy_from_slice(&self.0);
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+pub(crate) use avx2::Avx2Fma;
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{F64x4, Real};
+    use std::arch::x86_64::*;
+    use std::ops::{Mul, Sub};
+
+    /// Four lanes in an AVX register, with fused multiply-adds.
+    ///
+    /// Invariant: values of this type exist only on CPUs with AVX2 and FMA. The crate
+    /// creates them only in code reached through `sweep_tile_avx2_fma` (and in tests),
+    /// after the run-time feature check; every `unsafe` block below relies on this.
+    #[derive(Clone, Copy, Debug)]
+    pub(crate) struct Avx2Fma(__m256d);
+
+    impl Sub for Avx2Fma {
+        type Output = Self;
+        #[inline(always)]
+        fn sub(self, other: Self) -> Self {
+            // SAFETY: AVX2 is available (type invariant).
+            Self(unsafe { _mm256_sub_pd(self.0, other.0) })
+        }
+    }
+
+    impl Mul for Avx2Fma {
+        type Output = Self;
+        #[inline(always)]
+        fn mul(self, other: Self) -> Self {
+            // SAFETY: AVX2 is available (type invariant).
+            Self(unsafe { _mm256_mul_pd(self.0, other.0) })
+        }
+    }
+
+    impl Real for Avx2Fma {
+        #[inline(always)]
+        fn splat(x: f64) -> Self {
+            // SAFETY: AVX2 is available (type invariant).
+            Self(unsafe { _mm256_set1_pd(x) })
+        }
+
+        #[inline(always)]
+        fn at_most(self, hi: f64) -> Self {
+            // `min_pd(a, b)` returns b where a < b fails, which includes a NaN b.
+            // SAFETY: AVX2 is available (type invariant).
+            Self(unsafe { _mm256_min_pd(_mm256_set1_pd(hi), self.0) })
+        }
+
+        #[inline(always)]
+        fn exponent_scale(self) -> Self {
+            // SAFETY: AVX2 is available (type invariant).
+            unsafe {
+                let bits = _mm256_add_epi64(_mm256_castpd_si256(self.0), _mm256_set1_epi64x(1023));
+                Self(_mm256_castsi256_pd(_mm256_slli_epi64::<52>(bits)))
+            }
+        }
+
+        #[inline(always)]
+        fn mul_add(self, a: Self, b: Self) -> Self {
+            // SAFETY: FMA is available (type invariant).
+            Self(unsafe { _mm256_fmadd_pd(self.0, a.0, b.0) })
+        }
+
+        #[inline(always)]
+        fn neg_mul_add(self, a: Self, b: Self) -> Self {
+            // SAFETY: FMA is available (type invariant).
+            Self(unsafe { _mm256_fnmadd_pd(self.0, a.0, b.0) })
+        }
+
+        #[inline(always)]
+        fn neg_mul_sub(self, a: Self, b: Self) -> Self {
+            // SAFETY: FMA is available (type invariant).
+            Self(unsafe { _mm256_fnmsub_pd(self.0, a.0, b.0) })
+        }
+    }
+
+    impl F64x4 for Avx2Fma {
+        #[inline(always)]
+        fn load(v: &[f64]) -> Self {
+            let v = &v[..4];
+            // SAFETY: `v` holds 4 numbers; AVX2 is available (type invariant).
+            Self(unsafe { _mm256_loadu_pd(v.as_ptr()) })
+        }
+
+        #[inline(always)]
+        fn store(self, v: &mut [f64]) {
+            let v = &mut v[..4];
+            // SAFETY: `v` holds 4 numbers; AVX2 is available (type invariant).
+            unsafe { _mm256_storeu_pd(v.as_mut_ptr(), self.0) }
+        }
+    }
+}
+
+/// The implementations of the inner loops.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Isa {
+    /// Plain Rust on arrays of lanes, for any CPU.
+    Portable,
+    /// AVX2 registers and fused multiply-adds.
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    Avx2Fma,
+}
+
+impl Isa {
+    /// The fastest implementation the running CPU supports.
+    pub(crate) fn best() -> Self {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            return Isa::Avx2Fma;
+        }
+        Isa::Portable
+    }
+}
