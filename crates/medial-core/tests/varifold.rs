@@ -10,7 +10,7 @@ use medial_core::attachment::varifold::{
     default_width, Kind, Varifold, VarifoldParams, DEFAULT_NORMAL_WIDTH,
 };
 use medial_core::attachment::Attachment;
-use medial_core::testing::varifold_dense;
+use medial_core::testing::varifold_dense::{self, subdivided};
 use medial_core::{Error, MedialTemplate, TriMesh, Vec3};
 use nalgebra::{Rotation3, Unit};
 use proptest::prelude::*;
@@ -93,28 +93,6 @@ fn reindexed(mesh: &TriMesh, seed: u64) -> TriMesh {
         })
         .collect();
     triangles.shuffle(&mut rng);
-    TriMesh::new(points, triangles).unwrap()
-}
-
-/// Every triangle split in four at its edge midpoints: the same surface, other vertices.
-fn subdivided(mesh: &TriMesh) -> TriMesh {
-    let mut points = mesh.points().to_vec();
-    let mut midpoints = std::collections::HashMap::new();
-    let mut midpoint = |a: usize, b: usize, points: &mut Vec<Vec3>| {
-        *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
-            points.push((points[a] + points[b]) / 2.0);
-            points.len() - 1
-        })
-    };
-    let mut triangles = Vec::new();
-    for &[a, b, c] in mesh.triangles() {
-        let (ab, bc, ca) = (
-            midpoint(a, b, &mut points),
-            midpoint(b, c, &mut points),
-            midpoint(c, a, &mut points),
-        );
-        triangles.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
-    }
     TriMesh::new(points, triangles).unwrap()
 }
 

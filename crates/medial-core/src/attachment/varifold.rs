@@ -18,11 +18,11 @@
 //! [`crate::flow::kernel::GaussianKernel`] for the same kernel) and a kernel `φ` on the unit
 //! normals chosen by the [`Kind`]:
 //!
-//! | kind | `φ(t)` | `⟨S, T⟩` |
-//! |---|---|---|
-//! | [`Kind::Varifold`] (default) | `t²` | `Σ K(c_f, c_g) (n_f·n_g)² / (|n_f| |n_g|)` |
-//! | [`Kind::OrientedVarifold`] | `exp(−2(1 − t)/σ_n²)` | `Σ K(c_f, c_g) exp(−|u_f − u_g|²/σ_n²) |n_f| |n_g|` |
-//! | [`Kind::Current`] | `t` | `Σ K(c_f, c_g) n_f·n_g` |
+//! - [`Kind::Varifold`] (the default): `φ(t) = t²`,
+//!   `⟨S, T⟩ = Σ K(c_f, c_g) (n_f·n_g)² / (|n_f| |n_g|)`;
+//! - [`Kind::OrientedVarifold`]: `φ(t) = exp(−2(1 − t)/σ_n²)`,
+//!   `⟨S, T⟩ = Σ K(c_f, c_g) exp(−|u_f − u_g|²/σ_n²) |n_f| |n_g|`;
+//! - [`Kind::Current`]: `φ(t) = t`, `⟨S, T⟩ = Σ K(c_f, c_g) n_f·n_g`
 //!
 //! (the unoriented varifold of Charon & Trouvé 2013 with the Binet kernel on the normals, the
 //! oriented varifold with the Gaussian kernel on the sphere of Kaltenmark, Charlier & Charon

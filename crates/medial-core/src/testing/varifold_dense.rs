@@ -9,10 +9,35 @@
 //!
 //! for `x_f = c_f, n_f`, then to the corners. The reference the fused implementation is tested
 //! against and the baseline of its benchmark. Faces of zero area are not supported.
+//!
+//! Also a fixture for surfaces without correspondence: [`subdivided`], the same surface with
+//! other vertices and four times the triangles.
 
 use crate::attachment::varifold::Kind;
-use crate::Vec3;
+use crate::{TriMesh, Vec3};
 use nalgebra::DMatrix;
+use std::collections::HashMap;
+
+/// Every triangle of `mesh` split in four at its edge midpoints (an edge shared by two
+/// triangles is split once), with the orientation kept: the same surface, new vertices after
+/// the old ones.
+pub fn subdivided(mesh: &TriMesh) -> TriMesh {
+    let mut points = mesh.points().to_vec();
+    let mut split = HashMap::new();
+    let mut midpoint = |a: usize, b: usize| {
+        *split.entry((a.min(b), a.max(b))).or_insert_with(|| {
+            points.push((points[a] + points[b]) / 2.0);
+            points.len() - 1
+        })
+    };
+    let triangles = (mesh.triangles().iter())
+        .flat_map(|&[a, b, c]| {
+            let (ab, bc, ca) = (midpoint(a, b), midpoint(b, c), midpoint(c, a));
+            [[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]
+        })
+        .collect();
+    TriMesh::new(points, triangles).expect("the midpoints of a valid mesh make a valid mesh")
+}
 
 /// `g = ⟨S, S⟩ − 2⟨S, T⟩ + ⟨T, T⟩` and its gradient with respect to `q` (zero off the source
 /// triangles) for the source triangles `source` over `q`, the target mesh
