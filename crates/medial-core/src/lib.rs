@@ -18,6 +18,7 @@
 //! | [`model`] | the medial template, Loop tangents, medial constraints, spoke metrics | [`MedialTemplate`], [`model::MedialConstraints`], [`model::SpokeMetrics`] |
 //! | [`flow`] | the kernel flow of the landmarks and its exact adjoint; the kernel sums | [`flow::Flow`], [`flow::kernel::GaussianKernel`] |
 //! | [`attachment`] | data terms: SSD to corresponding points, Dice against an image | [`attachment::ssd::Ssd`], [`attachment::dice::DiceAttachment`] |
+//! | [`attachment::varifold`] | surfaces without correspondence: varifold, oriented varifold, current | [`attachment::varifold::Varifold`], [`attachment::varifold::default_width`] |
 //! | [`image`] | volumes in world space, rasterization of closed meshes | [`image::Volume`], [`image::rasterize`] |
 //! | [`fit`] | objective, L-BFGS, the augmented-Lagrangian schedule of a stage | [`fit::Objective`], [`fit::run_stage`] |
 //! | [`build`] | templates from a medial sheet: inflation, projection onto the constraints | [`build::inflate()`], [`build::project()`] |

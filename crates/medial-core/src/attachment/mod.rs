@@ -2,6 +2,7 @@
 
 pub mod dice;
 pub mod ssd;
+pub mod varifold;
 
 use crate::{Result, Vec3};
 

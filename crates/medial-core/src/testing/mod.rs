@@ -4,3 +4,4 @@
 
 pub mod dense;
 pub mod meshes;
+pub mod varifold_dense;
