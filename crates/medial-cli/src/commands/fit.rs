@@ -1,11 +1,11 @@
 //! `medial fit`: runs the stages of a config (the engine's [`run_stages`]) and writes the results.
 
 use crate::config::Config;
+use crate::config::StageConfig;
 use crate::error::CliError;
 use crate::output::{write_json, write_options};
 use crate::progress::{Log, LogRow, Progress};
 use crate::stage::{self, flow_of};
-use crate::config::StageConfig;
 use crate::summary::{Figures, StageSummary, Status, Summary};
 use crate::time_points::{self, time_points};
 use medial_core::fit::{
@@ -101,7 +101,13 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         .zip(outcomes.iter().zip(stage_seconds))
         .map(|((cfg, p), (outcome, seconds))| {
             let figures = p.end_figures(&model, &outcome.evaluation)?;
-            Ok(stage_summary(cfg, p.constraints.is_some(), outcome, seconds, figures))
+            Ok(stage_summary(
+                cfg,
+                p.constraints.is_some(),
+                outcome,
+                seconds,
+                figures,
+            ))
         })
         .collect::<Result<Vec<_>, CliError>>()?;
     let momenta = &outcomes.last().expect("a config has a stage").momenta;

@@ -178,8 +178,7 @@ pub fn check(guard: Option<&Guard>, e: &Evaluation, start: f64) -> Result<(), Un
     if let Some((_, what)) = finite.iter().find(|(v, _)| !v.is_finite()) {
         return Err(Unsound::NonFinite(what));
     }
-    if e
-        .final_positions
+    if e.final_positions
         .iter()
         .any(|p| !p.iter().all(|c| c.is_finite()))
     {

@@ -221,8 +221,9 @@ fn lbfgs(
     if grad0 == 0.0 {
         return Ok(Segment::Stop(StopReason::GradientTolerance));
     }
-    let unsound_trial =
-        |e: argmin::core::Error| Segment::Restart(Unsound::Evaluation(cached.error_or(e).to_string()));
+    let unsound_trial = |e: argmin::core::Error| {
+        Segment::Restart(Unsound::Evaluation(cached.error_or(e).to_string()))
+    };
     let mut problem = Problem::new(cached);
     let mut solver = LBFGS::new(MoreThuenteLineSearch::new(), options.memory.max(1))
         .with_tolerance_grad(0.0)
