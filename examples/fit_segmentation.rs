@@ -5,7 +5,7 @@
 //! `cargo run --release --example fit_segmentation` (about 10 s on 2 cores).
 
 use medial::attachment::dice::{DiceAttachment, DiceParams};
-use medial::fit::{run_stages, AlSchedule, FitEvent, LbfgsOptions, PlannedStage, Stage};
+use medial::fit::{run_stages, AlSchedule, FitEvent, Guard, LbfgsOptions, PlannedStage, Stage};
 use medial::flow::{Flow, FlowParams};
 use medial::model::{ConstraintUnits, MedialConstraints, SpokeMetrics};
 use std::path::Path;
@@ -44,6 +44,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             attachment: &dice,
             data_weight: 100.0,
             constraints: Some(&constraints),
+            guard: Some(&Guard::of_template(&template)),
         },
         schedule: AlSchedule {
             mu: 0.02,

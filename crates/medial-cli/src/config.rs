@@ -179,6 +179,14 @@ pub struct StageConfig {
     /// L-BFGS memory (correction pairs).
     #[serde(default = "defaults::lbfgs_memory")]
     pub lbfgs_memory: usize,
+    /// Constrained stages: the largest spoke–normal angle at the end that counts as medial,
+    /// degrees.
+    #[serde(default = "defaults::tolerance_deg")]
+    pub tolerance_deg: f64,
+    /// Constrained stages: the largest spoke-length mismatch at the end that counts as
+    /// medial, %.
+    #[serde(default = "defaults::tolerance_pct")]
+    pub tolerance_pct: f64,
 }
 
 mod defaults {
@@ -215,6 +223,12 @@ mod defaults {
     pub fn lbfgs_memory() -> usize {
         10
     }
+    pub fn tolerance_deg() -> f64 {
+        1.0
+    }
+    pub fn tolerance_pct() -> f64 {
+        1.0
+    }
 }
 
 impl StageConfig {
@@ -243,6 +257,8 @@ impl StageConfig {
             gradient_tolerance: defaults::gradient_tolerance(),
             relative_decrease: defaults::relative_decrease(),
             lbfgs_memory: defaults::lbfgs_memory(),
+            tolerance_deg: defaults::tolerance_deg(),
+            tolerance_pct: defaults::tolerance_pct(),
         }
     }
 
@@ -371,6 +387,8 @@ impl StageConfig {
         if self.al_iterations == 0 || self.lbfgs_memory == 0 {
             return Err("al_iterations and lbfgs_memory must be at least 1".into());
         }
+        positive("tolerance_deg", self.tolerance_deg)?;
+        positive("tolerance_pct", self.tolerance_pct)?;
         non_negative("gradient_tolerance", self.gradient_tolerance)?;
         non_negative("relative_decrease", self.relative_decrease)
     }

@@ -23,6 +23,14 @@ pub enum CliError {
     /// The inputs do not fit together (sizes, stage names, missing arrays).
     #[error("{0}")]
     Input(String),
+    /// The fit ended at an unsound iterate (folded, diverged, not finite); the results of the
+    /// last sound iterate were written, marked as such. Exit code 3.
+    #[error("{0}")]
+    Unsound(String),
+    /// The fit ended with its medial constraints above their tolerance; the results were
+    /// written, marked as such. Exit code 4.
+    #[error("{0}")]
+    ConstraintsNotMet(String),
     /// An operating-system error outside the file layer (creating the output folder).
     #[error("{}: {source}", path.display())]
     Io {
@@ -34,6 +42,17 @@ pub enum CliError {
 }
 
 impl CliError {
+    /// The process exit code: 3 for an unsound fit, 4 for a fit whose constraints were not
+    /// met (both with results written), 1 for every other failure (2, a wrong command line,
+    /// is clap's).
+    pub fn exit_code(&self) -> u8 {
+        match self {
+            CliError::Unsound(_) => 3,
+            CliError::ConstraintsNotMet(_) => 4,
+            _ => 1,
+        }
+    }
+
     /// An I/O error for `path`.
     pub fn io(path: &Path, source: std::io::Error) -> Self {
         CliError::Io {

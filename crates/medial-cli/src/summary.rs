@@ -73,13 +73,43 @@ pub struct StageSummary {
     pub iterations: usize,
     /// AL iterations.
     pub al_iterations: usize,
-    /// μ after the schedule.
+    /// μ of the last minimisation (0 without constraints); with `lambda.npy` (the last
+    /// constrained stage's multipliers) `medial eval` reproduces the stage's final figures.
     pub mu: f64,
     /// Why each minimisation stopped.
     pub stop: Vec<String>,
+    /// Whether the last minimisation stopped on a convergence criterion (gradient or relative
+    /// decrease) rather than its iteration budget.
+    pub converged: bool,
+    /// Restarts of L-BFGS from a sound iterate after an unsound one.
+    pub restarts: usize,
+    /// Constrained stages: whether the final max spoke–normal angle and max spoke mismatch are
+    /// within the stage's `tolerance_deg` and `tolerance_pct`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub constraints_met: Option<bool>,
+    /// Set when the stage ended at an unsound iterate: where and why.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unsound: Option<String>,
     /// The figures at the end of the stage.
     #[serde(flatten)]
     pub figures: Figures,
+}
+
+/// How a fit ended, best first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Status {
+    /// Every stage ran; the last one converged and met its constraint tolerances.
+    Converged,
+    /// Every stage ran and the constraints are met, but the last minimisation stopped on its
+    /// iteration budget (more iterations may improve the fit).
+    Budget,
+    /// Every stage ran, but the medial constraints are above their tolerance at the end
+    /// (exit code 4).
+    ConstraintsNotMet,
+    /// A stage ended at an unsound iterate (folded, diverged, not finite); the results are
+    /// those of the last sound iterate and later stages did not run (exit code 3).
+    Unsound,
 }
 
 /// `summary.json`.
@@ -87,6 +117,8 @@ pub struct StageSummary {
 pub struct Summary {
     /// `medial` version.
     pub version: &'static str,
+    /// How the fit ended.
+    pub status: Status,
     /// `k`.
     pub landmarks: usize,
     /// Boundary points.

@@ -1,13 +1,16 @@
 //! `medial fit`: runs the stages of a config (the engine's [`run_stages`]) and writes the results.
 
 use crate::config::Config;
+use crate::config::StageConfig;
 use crate::error::CliError;
 use crate::output::{write_json, write_options};
 use crate::progress::{Log, LogRow, Progress};
 use crate::stage::{self, flow_of};
-use crate::summary::{StageSummary, Summary};
+use crate::summary::{Figures, StageSummary, Status, Summary};
 use crate::time_points::{self, time_points};
-use medial_core::fit::{run_stages, ConstraintSet, FitEvent, PlannedStage, Stage, StageOutcome};
+use medial_core::fit::{
+    run_stages, ConstraintSet, FitEvent, Guard, PlannedStage, Stage, StageOutcome,
+};
 use medial_core::flow::{Flow, Trajectory};
 use medial_core::model::{MedialConstraints, Model};
 use medial_io::model::{boundary_polydata, medial_polydata};
@@ -25,9 +28,12 @@ pub struct FitOptions {
     pub quiet: bool,
 }
 
-/// Runs `config` and writes everything into `options.out`.
+/// Runs `config` and writes everything into `options.out`. A fit that ends at an unsound
+/// iterate, or with its constraints above their tolerance, writes its results (marked in
+/// `summary.json`'s `status`) and then returns the error that says so.
 pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
     let model = medial_io::model::read_model(&config.model.template)?;
+    let guard = Guard::new(&model);
     let flow = flow_of(config, model.landmarks().len())?;
     let prepared = config
         .stages
@@ -43,6 +49,7 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
                 attachment: p.attachment.as_ref(),
                 data_weight: p.data_weight,
                 constraints: p.constraints.as_ref().map(|c| c as &dyn ConstraintSet),
+                guard: Some(&guard),
             },
             schedule: p.schedule,
             lbfgs: p.lbfgs,
@@ -93,27 +100,45 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         .zip(&prepared)
         .zip(outcomes.iter().zip(stage_seconds))
         .map(|((cfg, p), (outcome, seconds))| {
-            Ok(StageSummary {
-                name: cfg.name.clone(),
+            let figures = p.end_figures(&model, &outcome.evaluation)?;
+            Ok(stage_summary(
+                cfg,
+                p.constraints.is_some(),
+                outcome,
                 seconds,
-                evaluations: outcome.evaluations,
-                iterations: outcome.iterations,
-                al_iterations: outcome.al_iterations,
-                mu: outcome.mu,
-                stop: outcome.stops.iter().map(|s| s.to_string()).collect(),
-                figures: p.end_figures(&model, &outcome.evaluation)?,
-            })
+                figures,
+            ))
         })
         .collect::<Result<Vec<_>, CliError>>()?;
     let momenta = &outcomes.last().expect("a config has a stage").momenta;
     let trajectory = flow.shoot(model.landmarks(), momenta)?;
     write_results(config, options, &model, &flow, momenta, &trajectory)?;
+    if let Some(lambda) = outcomes.iter().rev().find(|o| !o.lambda.is_empty()) {
+        let per_time_point = lambda.lambda.len() / flow.time_steps();
+        medial_io::npy::write_npy(
+            &options.out.join("lambda.npy"),
+            &[flow.time_steps(), per_time_point],
+            &lambda.lambda,
+        )?;
+    }
     let points = time_points(&model, &trajectory);
     if !points.is_empty() {
         time_points::write_csv(&options.out.join("time_points.csv"), &points)?;
     }
+    let last = stages.last().expect("a config has a stage");
+    let status = if last.unsound.is_some() {
+        Status::Unsound
+    } else if last.constraints_met == Some(false) {
+        Status::ConstraintsNotMet
+    } else if last.converged {
+        Status::Converged
+    } else {
+        Status::Budget
+    };
+    let failure = failure(status, last, &config.stages[stages.len() - 1], &options.out);
     let summary = Summary {
         version: env!("CARGO_PKG_VERSION"),
+        status,
         landmarks: model.landmarks().len(),
         boundary_points: model.boundary_count(),
         medial_atoms: model.medial_count(),
@@ -125,13 +150,75 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         threads: options.threads,
         seconds,
         evaluations: stages.iter().map(|s| s.evaluations).sum(),
-        final_figures: stages.last().expect("a config has a stage").figures.clone(),
+        final_figures: last.figures.clone(),
         over_time: time_points::over_time(&points),
         stages,
     };
     write_json(&options.out.join("summary.json"), &summary)?;
     log.finish()?;
-    Ok(summary)
+    match failure {
+        Some(e) => Err(e),
+        None => Ok(summary),
+    }
+}
+
+/// The summary of a stage that ran.
+fn stage_summary(
+    cfg: &StageConfig,
+    constrained: bool,
+    outcome: &StageOutcome,
+    seconds: f64,
+    figures: Figures,
+) -> StageSummary {
+    let constraints_met = constrained.then(|| {
+        figures
+            .max_spoke_normal_deg
+            .zip(figures.max_spoke_mismatch_pct)
+            .is_some_and(|(deg, pct)| deg <= cfg.tolerance_deg && pct <= cfg.tolerance_pct)
+    });
+    StageSummary {
+        name: cfg.name.clone(),
+        seconds,
+        evaluations: outcome.evaluations,
+        iterations: outcome.iterations,
+        al_iterations: outcome.al_iterations,
+        mu: outcome.mu,
+        stop: outcome.stops.iter().map(|s| s.to_string()).collect(),
+        converged: outcome.converged(),
+        restarts: outcome.restarts,
+        constraints_met,
+        unsound: outcome.unsound.as_ref().map(|u| {
+            format!(
+                "AL iteration {}, iteration {}: {}",
+                u.al_iteration, u.iteration, u.cause
+            )
+        }),
+        figures,
+    }
+}
+
+/// The error a fit that ended `status` returns once its results are written (none for a
+/// sound fit within its tolerances).
+fn failure(status: Status, last: &StageSummary, cfg: &StageConfig, out: &Path) -> Option<CliError> {
+    let written = format!("results written to {} (status \"", out.display());
+    match status {
+        Status::Unsound => Some(CliError::Unsound(format!(
+            "stage '{}', {}; {written}unsound\", the last sound iterate)",
+            last.name,
+            last.unsound.as_deref().unwrap_or_default()
+        ))),
+        Status::ConstraintsNotMet => Some(CliError::ConstraintsNotMet(format!(
+            "stage '{}': the medial constraints are not met (max spoke–normal {:.3}°, max \
+             mismatch {:.3} %; tolerance {}°, {} %): raise mu, mu_factor or al_iterations; \
+             {written}constraints_not_met\")",
+            last.name,
+            last.figures.max_spoke_normal_deg.unwrap_or(f64::NAN),
+            last.figures.max_spoke_mismatch_pct.unwrap_or(f64::NAN),
+            cfg.tolerance_deg,
+            cfg.tolerance_pct,
+        ))),
+        Status::Converged | Status::Budget => None,
+    }
 }
 
 /// The line printed at the end of a stage.

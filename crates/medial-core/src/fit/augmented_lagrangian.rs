@@ -7,10 +7,12 @@
 //! when `μ` runs away.
 
 use crate::attachment::Attachment;
+use crate::fit::guard::{self, Guard, Unsound};
 use crate::fit::objective::{ConstraintSet, Evaluation, Objective, Penalty};
-use crate::fit::optimize::{minimize, IterationReport, LbfgsOptions, StopReason};
+use crate::fit::optimize::{minimize, IterationReport, LbfgsOptions, Minimum, StopReason};
 use crate::flow::Flow;
 use crate::{Error, Result, Vec3};
+use std::cell::Cell;
 
 /// When `μ` grows between AL iterations.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -67,7 +69,8 @@ impl AlSchedule {
     }
 }
 
-/// One stage: flow, initial landmarks, attachment and its weight, optional constraints.
+/// One stage: flow, initial landmarks, attachment and its weight, optional constraints and
+/// fold test.
 #[derive(Clone, Copy)]
 pub struct Stage<'a> {
     /// The flow.
@@ -80,6 +83,9 @@ pub struct Stage<'a> {
     pub data_weight: f64,
     /// Medial constraints, or none.
     pub constraints: Option<&'a dyn ConstraintSet>,
+    /// The fold test of every accepted iterate ([`Guard::new`] of the model), or none (the
+    /// other checks of [`guard::check`] always apply).
+    pub guard: Option<&'a Guard>,
 }
 
 /// Where an L-BFGS iteration sits in the schedule.
@@ -93,10 +99,21 @@ pub struct Progress<'r> {
     pub report: &'r IterationReport<'r>,
 }
 
+/// Where and why a stage ended at an unsound iterate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct UnsoundStop {
+    /// AL iteration (0-based).
+    pub al_iteration: usize,
+    /// The L-BFGS iteration that was refused (1-based within its minimisation).
+    pub iteration: usize,
+    /// Why.
+    pub cause: Unsound,
+}
+
 /// The outcome of a stage.
 #[derive(Clone, Debug)]
 pub struct StageOutcome {
-    /// Final momenta.
+    /// Final momenta: the last sound iterate.
     pub momenta: Vec<f64>,
     /// Figures of the last minimisation at its optimum.
     pub evaluation: Evaluation,
@@ -106,14 +123,32 @@ pub struct StageOutcome {
     pub evaluations: usize,
     /// AL iterations done.
     pub al_iterations: usize,
-    /// `μ` after the schedule.
+    /// `μ` of the last minimisation (0 without constraints).
     pub mu: f64,
+    /// The multipliers `λ` of the last minimisation, `N·L` numbers (time point after time
+    /// point; empty without constraints): with [`Self::mu`] they give [`Self::evaluation`]
+    /// again.
+    pub lambda: Vec<f64>,
     /// Why each minimisation stopped.
     pub stops: Vec<StopReason>,
+    /// Restarts after an unsound iterate, over all minimisations.
+    pub restarts: usize,
+    /// Set when the stage ended at an unsound iterate (after a restart): the momenta are then
+    /// those of the last sound one, and the fit cannot go on.
+    pub unsound: Option<UnsoundStop>,
+}
+
+impl StageOutcome {
+    /// Whether the last minimisation stopped on a convergence criterion.
+    pub fn converged(&self) -> bool {
+        self.stops.last().is_some_and(StopReason::converged)
+    }
 }
 
 /// Runs a stage from the momenta `start`: one minimisation without constraints, the AL
-/// schedule with them.
+/// schedule with them. Every accepted iterate is checked ([`guard::check`] against the
+/// objective at the stage's start); after a minimisation that needed a restart, `μ` grows by
+/// `√mu_factor` only. A minimisation that ends unsound ends the stage ([`StageOutcome::unsound`]).
 pub fn run_stage(
     stage: &Stage<'_>,
     schedule: &AlSchedule,
@@ -121,6 +156,12 @@ pub fn run_stage(
     start: Vec<f64>,
     mut progress: impl FnMut(&Progress<'_>),
 ) -> Result<StageOutcome> {
+    let stage_start = Cell::new(None);
+    let check = |e: &Evaluation| {
+        let start = stage_start.get().unwrap_or(e.total);
+        stage_start.set(Some(start));
+        guard::check(stage.guard, e, start)
+    };
     let Some(constraints) = stage.constraints else {
         let objective = Objective::new(
             stage.flow,
@@ -128,7 +169,7 @@ pub fn run_stage(
             stage.attachment,
             stage.data_weight,
         );
-        let min = minimize(&objective, start, options, |r| {
+        let min = minimize(&objective, start, options, check, |r| {
             progress(&Progress {
                 al_iteration: 0,
                 mu: 0.0,
@@ -136,12 +177,15 @@ pub fn run_stage(
             })
         })?;
         return Ok(StageOutcome {
+            unsound: unsound_stop(0, &min),
             momenta: min.momenta,
             evaluation: min.evaluation,
             iterations: min.iterations,
             evaluations: min.evaluations,
             al_iterations: 1,
             mu: 0.0,
+            lambda: Vec::new(),
+            restarts: min.restarts,
             stops: vec![min.stop],
         });
     };
@@ -156,7 +200,10 @@ pub fn run_stage(
         evaluations: 0,
         al_iterations: 0,
         mu,
+        lambda: Vec::new(),
         stops: Vec::new(),
+        restarts: 0,
+        unsound: None,
     };
     let mut previous_violation = f64::INFINITY;
     for al_iteration in 0..schedule.iterations {
@@ -171,35 +218,57 @@ pub fn run_stage(
             mu,
             lambda: &lambda,
         })?;
-        let min = minimize(&objective, momenta, options, |r| {
+        let min = minimize(&objective, momenta, options, check, |r| {
             progress(&Progress {
                 al_iteration,
                 mu,
                 report: r,
             })
         })?;
-        let values = objective.constraint_values(&min.momenta)?;
+        outcome.iterations += min.iterations;
+        outcome.evaluations += min.evaluations;
+        outcome.al_iterations += 1;
+        outcome.restarts += min.restarts;
+        outcome.evaluation = min.evaluation.clone();
+        outcome.mu = mu;
+        outcome.lambda.clone_from(&lambda);
+        outcome.unsound = unsound_stop(al_iteration, &min);
+        outcome.stops.push(min.stop);
+        momenta = min.momenta;
+        if outcome.unsound.is_some() {
+            break;
+        }
+        let values = objective.constraint_values(&momenta)?;
         lambda
             .iter_mut()
             .zip(&values)
             .for_each(|(lam, c)| *lam -= mu * c);
-        let violation = min.evaluation.max_abs_constraint;
+        let violation = outcome.evaluation.max_abs_constraint;
         let grow = match schedule.mu_update {
             MuUpdate::Always => true,
             MuUpdate::IfNotHalved => violation > 0.5 * previous_violation,
         };
         previous_violation = violation;
-        outcome.iterations += min.iterations;
-        outcome.evaluations += min.evaluations;
-        outcome.al_iterations += 1;
-        outcome.evaluation = min.evaluation.clone();
-        outcome.stops.push(min.stop);
-        momenta = min.momenta;
         if grow {
-            mu = (mu * schedule.mu_factor).min(schedule.mu_max);
+            let factor = match min.restarts {
+                0 => schedule.mu_factor,
+                _ => schedule.mu_factor.sqrt(),
+            };
+            mu = (mu * factor).min(schedule.mu_max);
         }
     }
     outcome.momenta = momenta;
-    outcome.mu = mu;
     Ok(outcome)
+}
+
+/// The unsound stop of a minimisation of AL iteration `al_iteration`, if it ended so.
+fn unsound_stop(al_iteration: usize, min: &Minimum) -> Option<UnsoundStop> {
+    match &min.stop {
+        StopReason::Unsound(cause) => Some(UnsoundStop {
+            al_iteration,
+            iteration: min.iterations + 1,
+            cause: cause.clone(),
+        }),
+        _ => None,
+    }
 }

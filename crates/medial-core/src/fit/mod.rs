@@ -1,13 +1,18 @@
 //! Fitting: the objective of one stage and its exact gradient ([`objective`]), its minimisation
-//! with L-BFGS ([`optimize`]), the augmented-Lagrangian schedule of a stage
-//! ([`augmented_lagrangian`]), and a whole fit of several stages in a row ([`stages`]).
+//! with L-BFGS ([`optimize`]) with every iterate checked for soundness ([`guard`]), the
+//! augmented-Lagrangian schedule of a stage ([`augmented_lagrangian`]), and a whole fit of
+//! several stages in a row ([`stages`]).
 
 pub mod augmented_lagrangian;
+pub mod guard;
 pub mod objective;
 pub mod optimize;
 pub mod stages;
 
-pub use augmented_lagrangian::{run_stage, AlSchedule, MuUpdate, Progress, Stage, StageOutcome};
+pub use augmented_lagrangian::{
+    run_stage, AlSchedule, MuUpdate, Progress, Stage, StageOutcome, UnsoundStop,
+};
+pub use guard::{Guard, Unsound};
 pub use objective::{ConstraintSet, Evaluation, Objective, Penalty};
 pub use optimize::{minimize, LbfgsOptions, StopReason};
 pub use stages::{run_stages, FitEvent, PlannedStage};

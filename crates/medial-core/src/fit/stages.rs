@@ -37,8 +37,9 @@ pub enum FitEvent<'e> {
 }
 
 /// Runs `stages` in order, the first from zero momenta, each later one from the momenta of the
-/// one before; returns the outcome of every stage (the last one holds the fit's momenta).
-/// `report` sees every L-BFGS iteration and the end of every stage.
+/// one before; returns the outcome of every stage run (the last one holds the fit's momenta).
+/// A stage that ends unsound ([`StageOutcome::unsound`]) is the last one run. `report` sees
+/// every L-BFGS iteration and the end of every stage.
 pub fn run_stages(
     stages: &[PlannedStage<'_>],
     mut report: impl FnMut(FitEvent<'_>),
@@ -76,7 +77,11 @@ pub fn run_stages(
             outcome: &outcome,
         });
         momenta = outcome.momenta.clone();
+        let unsound = outcome.unsound.is_some();
         outcomes.push(outcome);
+        if unsound {
+            break;
+        }
     }
     Ok(outcomes)
 }

@@ -1,0 +1,144 @@
+//! A fit the tool knows is bad is never reported as a success: end-to-end tests of the guards
+//! through the built binary on the shipped toy and t001-bent cases. Each diverging setting
+//! (a huge data weight, a kernel far narrower than the wall, the constraints off on a real
+//! template) ends with one message naming stage, AL iteration, iteration and cause, exit code 3,
+//! and the results of the last sound iterate written with `"status": "unsound"`; a schedule too
+//! short for the constraints exits 4; a sound fit's multipliers reproduce its final figures.
+
+mod common;
+
+use common::{f, medial, run_json, s, text};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+/// The shipped example `name`'s config with `edit` applied, written into `dir` beside links
+/// to the example's files.
+fn example_config(dir: &Path, name: &str, edit: impl Fn(String) -> String) -> PathBuf {
+    let example = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples")
+        .join(name);
+    for entry in std::fs::read_dir(&example).unwrap() {
+        let entry = entry.unwrap();
+        let to = dir.join(entry.file_name());
+        if !to.exists() {
+            std::fs::copy(entry.path(), to).unwrap();
+        }
+    }
+    let text = std::fs::read_to_string(example.join("fit.toml")).unwrap();
+    let path = dir.join("edited.toml");
+    std::fs::write(&path, edit(text)).unwrap();
+    path
+}
+
+fn read_summary(out: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+}
+
+/// Runs the fit, asserts exit code 3 with a message naming the stage, the AL iteration, the
+/// iteration and `cause`, and an unsound summary beside the last sound results.
+fn assert_unsound(config: &Path, out: &Path, stage: &str, cause: &str) -> Value {
+    let o = medial(&["fit", s(config), "--out", s(out), "-q"]);
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(3), "{err}");
+    let line = err.lines().last().unwrap();
+    for needle in [
+        &format!("stage '{stage}'"),
+        "AL iteration",
+        "iteration",
+        cause,
+    ] {
+        assert!(line.contains(needle), "{line:?} lacks {needle:?}");
+    }
+    assert!(line.contains("unsound"), "{line}");
+    let summary = read_summary(out);
+    assert_eq!(summary["status"], "unsound");
+    let last = summary["stages"].as_array().unwrap().last().unwrap();
+    assert!(last["unsound"].as_str().unwrap().contains(cause), "{last}");
+    assert!(out.join("momenta.npy").exists() && out.join("fitted_template.vtk").exists());
+    summary
+}
+
+#[test]
+fn a_huge_data_weight_or_a_tiny_kernel_stops_as_unsound_with_the_last_sound_results() {
+    let dir = tempfile::tempdir().unwrap();
+    let heavy = example_config(dir.path(), "toy", |t| {
+        t.replace(
+            "name = \"dice\"\nattachment = \"dice\"",
+            "name = \"dice\"\nattachment = \"dice\"\nweight = 1e12",
+        )
+    });
+    let s1 = assert_unsound(&heavy, &dir.path().join("heavy"), "dice", "folds");
+    println!("weight 1e12: {}", s1["stages"][1]["unsound"]);
+    let tiny = example_config(dir.path(), "toy", |t| {
+        t.replace("sigma = 2.0 ", "sigma = 0.01 ")
+    });
+    assert!(std::fs::read_to_string(&tiny)
+        .unwrap()
+        .contains("sigma = 0.01"));
+    let s2 = assert_unsound(&tiny, &dir.path().join("tiny"), "dice", "folds");
+    println!("sigma 0.01: {}", s2["stages"][1]["unsound"]);
+}
+
+#[test]
+fn the_constraints_off_on_a_real_template_stop_as_unsound_when_the_model_folds() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = example_config(dir.path(), "t001-bent", |t| {
+        t.replace(
+            "name = \"dice\"\nattachment = \"dice\"",
+            "name = \"dice\"\nattachment = \"dice\"\nconstraints = false",
+        )
+    });
+    let summary = assert_unsound(&config, &dir.path().join("out"), "dice", "folds");
+    println!(
+        "t001-bent without constraints: {}",
+        summary["stages"][1]["unsound"]
+    );
+}
+
+#[test]
+fn constraints_above_tolerance_exit_4_and_the_multipliers_reproduce_a_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    // One AL iteration at the schedule's first μ leaves the constraints far from medial.
+    let short = example_config(dir.path(), "toy", |t| {
+        t.replace("al_iterations = 6", "al_iterations = 1")
+    });
+    let out = dir.path().join("short");
+    let o = medial(&["fit", s(&short), "--out", s(&out), "-q"]);
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(4), "{err}");
+    assert!(
+        err.contains("constraints are not met") && err.contains("tolerance"),
+        "{err}"
+    );
+    let summary = read_summary(&out);
+    assert_eq!(summary["status"], "constraints_not_met");
+    assert_eq!(summary["stages"][1]["constraints_met"], false);
+    // The shipped schedule meets them; eval with its λ and μ gives its final objective.
+    let config = example_config(dir.path(), "toy", |t| t);
+    let out = dir.path().join("full");
+    let o = medial(&["fit", s(&config), "--out", s(&out), "-q"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let summary = read_summary(&out);
+    assert_eq!(summary["stages"][1]["constraints_met"], true);
+    assert!(["converged", "budget"].contains(&summary["status"].as_str().unwrap()));
+    let mu = summary["stages"][1]["mu"].to_string();
+    let figures = run_json(&[
+        "eval",
+        s(&config),
+        "--stage",
+        "dice",
+        "--momenta",
+        s(&out.join("momenta.npy")),
+        "--lambda",
+        s(&out.join("lambda.npy")),
+        "--mu",
+        &mu,
+    ]);
+    for key in ["total", "penalty", "data", "kinetic"] {
+        let (a, b) = (f(&figures[key]), f(&summary["final"][key]));
+        assert!(
+            (a - b).abs() <= 1e-12 * b.abs().max(1.0),
+            "{key}: eval {a} vs fit {b}"
+        );
+    }
+}

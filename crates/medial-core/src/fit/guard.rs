@@ -1,0 +1,282 @@
+//! Soundness of an iterate: what makes a configuration of the landmarks unusable, checked at
+//! every accepted L-BFGS iterate so that a fit never reports a folded or diverged model.
+//!
+//! An iterate is unsound ([`Unsound`]) when
+//! - a figure of its evaluation is not finite;
+//! - the Dice estimate leaves `[0, 1]` (it does when the model's volume turns negative);
+//! - the objective exceeds [`DIVERGED`] times the magnitude of the stage's starting value;
+//! - the model folds. For a medial template each boundary triangle `(b₀, b₁, b₂)` and the
+//!   medial points `(m₀, m₁, m₂)` of its atoms bound a prism, cut into the tetrahedra
+//!   `(b₀ b₁ b₂ m₀)`, `(b₁ b₂ m₀ m₁)`, `(b₂ m₀ m₁ m₂)`; a prism is folded when the sum of their
+//!   signed volumes `det[p₁ − p₀, p₂ − p₀, p₃ − p₀] / 6` has the opposite sign of the same sum
+//!   at `t = 0`. For a plain mesh a triangle is inverted when its normal
+//!   `(p_b − p_a) × (p_c − p_a)` turns against its normal at `t = 0` (negative dot product).
+//!
+//! The checks cost `O(triangles)` per iterate: nothing against one evaluation.
+
+use crate::fit::objective::Evaluation;
+use crate::model::{MedialTemplate, Model};
+use crate::Vec3;
+
+/// An objective above `DIVERGED · max(|E₀|, 1)`, `E₀` its value at the start of the stage,
+/// counts as diverged.
+pub const DIVERGED: f64 = 1e6;
+
+/// Why an iterate is not sound.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Unsound {
+    /// A figure that must be finite is not; names it.
+    NonFinite(&'static str),
+    /// The Dice estimate left `[0, 1]`.
+    DiceOutOfRange(f64),
+    /// The objective rose far above the stage's start.
+    Diverged {
+        /// The objective at the iterate.
+        total: f64,
+        /// The objective at the start of the stage.
+        start: f64,
+    },
+    /// Boundary–medial prisms turned inside out (medial templates).
+    FoldedPrisms {
+        /// Folded prisms.
+        folded: usize,
+        /// All prisms (boundary triangles).
+        of: usize,
+    },
+    /// Boundary triangles whose orientation flipped (plain meshes).
+    InvertedTriangles {
+        /// Inverted triangles.
+        inverted: usize,
+        /// All triangles.
+        of: usize,
+    },
+    /// The objective could not be evaluated at a trial point of the line search; the
+    /// engine's message.
+    Evaluation(String),
+}
+
+impl std::fmt::Display for Unsound {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Unsound::NonFinite(what) => write!(f, "{what} is not finite"),
+            Unsound::DiceOutOfRange(d) => {
+                write!(f, "the Dice estimate {d} left [0, 1] (the model folds)")
+            }
+            Unsound::Diverged { total, start } => write!(
+                f,
+                "the objective diverged ({total:.3e}, from {start:.3e} at the start of the stage)"
+            ),
+            Unsound::FoldedPrisms { folded, of } => write!(
+                f,
+                "the model folds: {folded} of {of} boundary–medial prisms turned inside out"
+            ),
+            Unsound::InvertedTriangles { inverted, of } => write!(
+                f,
+                "the surface folds: {inverted} of {of} boundary triangles inverted"
+            ),
+            Unsound::Evaluation(why) => write!(f, "the objective failed at a trial step: {why}"),
+        }
+    }
+}
+
+/// The fold test of a model: the cells whose orientation is watched, with their orientation at
+/// `t = 0`.
+#[derive(Clone, Debug)]
+pub struct Guard {
+    cells: Cells,
+}
+
+#[derive(Clone, Debug)]
+enum Cells {
+    /// Medial template: per boundary triangle, the landmarks `[b₀, b₁, b₂, m₀, m₁, m₂]` and the
+    /// sign of its prism's volume at `t = 0` (0 for a degenerate prism, never flagged).
+    Prisms(Vec<([usize; 6], f64)>),
+    /// Plain mesh: triangles and their normals at `t = 0`.
+    Triangles(Vec<([usize; 3], Vec3)>),
+}
+
+impl Guard {
+    /// The fold test of `model` at its landmarks.
+    pub fn new(model: &Model) -> Self {
+        match model {
+            Model::Medial(t) => Self::of_template(t),
+            Model::Plain(mesh) => {
+                let p = mesh.points();
+                let cells = mesh
+                    .triangles()
+                    .iter()
+                    .map(|&t| (t, normal(p, t)))
+                    .collect();
+                Self {
+                    cells: Cells::Triangles(cells),
+                }
+            }
+        }
+    }
+
+    /// The fold test of a medial template at its landmarks.
+    pub fn of_template(template: &MedialTemplate) -> Self {
+        let q = template.landmarks();
+        let atom = template.medial_index();
+        let prisms = template
+            .boundary_triangles()
+            .iter()
+            .map(|&[a, b, c]| {
+                let m = |v: usize| template.atom_landmark(atom[v]);
+                let corners = [a, b, c, m(a), m(b), m(c)];
+                (corners, prism_volume(q, &corners).signum())
+            })
+            .collect();
+        Self {
+            cells: Cells::Prisms(prisms),
+        }
+    }
+
+    /// Checks the landmarks `q` (all `k`): `Err` with the count when the model folds.
+    pub fn check_fold(&self, q: &[Vec3]) -> Result<(), Unsound> {
+        match &self.cells {
+            Cells::Prisms(prisms) => {
+                let folded = prisms
+                    .iter()
+                    .filter(|(corners, sign)| prism_volume(q, corners) * sign < 0.0)
+                    .count();
+                match folded {
+                    0 => Ok(()),
+                    folded => Err(Unsound::FoldedPrisms {
+                        folded,
+                        of: prisms.len(),
+                    }),
+                }
+            }
+            Cells::Triangles(triangles) => {
+                let inverted = triangles
+                    .iter()
+                    .filter(|(t, n0)| normal(q, *t).dot(n0) < 0.0)
+                    .count();
+                match inverted {
+                    0 => Ok(()),
+                    inverted => Err(Unsound::InvertedTriangles {
+                        inverted,
+                        of: triangles.len(),
+                    }),
+                }
+            }
+        }
+    }
+}
+
+/// Checks an evaluation: finite figures, the Dice estimate in `[0, 1]`, the objective below
+/// [`DIVERGED`] `· max(|start|, 1)`, and, with a guard, no fold at the end of the flow.
+pub fn check(guard: Option<&Guard>, e: &Evaluation, start: f64) -> Result<(), Unsound> {
+    let finite = [
+        (e.total, "the objective"),
+        (e.kinetic, "the kinetic energy"),
+        (e.data, "the data term"),
+        (e.penalty, "the penalty"),
+        (e.max_abs_constraint, "max |C|"),
+    ];
+    if let Some((_, what)) = finite.iter().find(|(v, _)| !v.is_finite()) {
+        return Err(Unsound::NonFinite(what));
+    }
+    if e.final_positions
+        .iter()
+        .any(|p| !p.iter().all(|c| c.is_finite()))
+    {
+        return Err(Unsound::NonFinite("a landmark position"));
+    }
+    if let Some(d) = e.dice.filter(|d| !(0.0..=1.0).contains(d)) {
+        return Err(Unsound::DiceOutOfRange(d));
+    }
+    if e.total > DIVERGED * start.abs().max(1.0) {
+        return Err(Unsound::Diverged {
+            total: e.total,
+            start,
+        });
+    }
+    guard.map_or(Ok(()), |g| g.check_fold(&e.final_positions))
+}
+
+/// Signed volume of a prism `[b₀, b₁, b₂, m₀, m₁, m₂]`: the sum of its three tetrahedra.
+fn prism_volume(q: &[Vec3], c: &[usize; 6]) -> f64 {
+    let vol = |a: usize, b: usize, d: usize, e: usize| {
+        (q[b] - q[a]).cross(&(q[d] - q[a])).dot(&(q[e] - q[a])) / 6.0
+    };
+    vol(c[0], c[1], c[2], c[3]) + vol(c[1], c[2], c[3], c[4]) + vol(c[2], c[3], c[4], c[5])
+}
+
+/// `(p_b − p_a) × (p_c − p_a)` of triangle `[a, b, c]`.
+fn normal(p: &[Vec3], [a, b, c]: [usize; 3]) -> Vec3 {
+    (p[b] - p[a]).cross(&(p[c] - p[a]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::meshes::{bipyramid, octahedron};
+    use crate::TriMesh;
+
+    fn evaluation(q: &[Vec3]) -> Evaluation {
+        Evaluation {
+            total: 1.0,
+            final_positions: q.to_vec(),
+            ..Evaluation::default()
+        }
+    }
+
+    #[test]
+    fn a_medial_template_is_sound_until_a_spoke_crosses_its_sheet() {
+        let t = bipyramid(0.5);
+        let guard = Guard::of_template(&t);
+        let mut q = t.landmarks().to_vec();
+        assert_eq!(check(Some(&guard), &evaluation(&q), 1.0), Ok(()));
+        // Scaling and rotating keep every prism's orientation.
+        let r = nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 1.0);
+        let moved: Vec<Vec3> = q.iter().map(|p| r * p * 2.5).collect();
+        assert_eq!(guard.check_fold(&moved), Ok(()));
+        // The top apex pushed through the medial sheet: its six prisms turn inside out.
+        q[0].z = -0.2;
+        assert_eq!(
+            guard.check_fold(&q),
+            Err(Unsound::FoldedPrisms { folded: 6, of: 12 })
+        );
+    }
+
+    #[test]
+    fn a_plain_mesh_is_inverted_when_a_vertex_passes_through_the_opposite_side() {
+        let (points, triangles) = octahedron();
+        let mesh = TriMesh::new(points.clone(), triangles).unwrap();
+        let guard = Guard::new(&Model::Plain(mesh));
+        assert_eq!(guard.check_fold(&points), Ok(()));
+        let mut q = points;
+        q[4].z = -1.5; // the +z apex pushed through to the far side: its four triangles flip.
+        assert_eq!(
+            guard.check_fold(&q),
+            Err(Unsound::InvertedTriangles { inverted: 4, of: 8 })
+        );
+    }
+
+    #[test]
+    fn non_finite_figures_dice_out_of_range_and_divergence_are_unsound() {
+        let q = vec![Vec3::zeros()];
+        let mut e = evaluation(&q);
+        e.penalty = f64::NAN;
+        assert_eq!(check(None, &e, 1.0), Err(Unsound::NonFinite("the penalty")));
+        let mut e = evaluation(&q);
+        e.dice = Some(5.8);
+        assert_eq!(check(None, &e, 1.0), Err(Unsound::DiceOutOfRange(5.8)));
+        let mut e = evaluation(&q);
+        e.total = 2e7;
+        assert!(matches!(
+            check(None, &e, 10.0),
+            Err(Unsound::Diverged { .. })
+        ));
+        e.total = 9e6;
+        assert_eq!(check(None, &e, 10.0), Ok(()));
+        let mut e = evaluation(&[Vec3::new(f64::INFINITY, 0.0, 0.0)]);
+        e.dice = Some(0.5);
+        assert_eq!(
+            check(None, &e, 1.0),
+            Err(Unsound::NonFinite("a landmark position"))
+        );
+    }
+}
