@@ -79,6 +79,8 @@ pub enum AttachmentKind {
     Ssd,
     /// `1 − Dice` against a binary image.
     Dice,
+    /// Varifold (or current) distance to a surface without correspondence.
+    Varifold,
 }
 
 impl AttachmentKind {
@@ -87,6 +89,7 @@ impl AttachmentKind {
         match self {
             AttachmentKind::Ssd => "ssd",
             AttachmentKind::Dice => "dice",
+            AttachmentKind::Varifold => "varifold",
         }
     }
 }
@@ -113,13 +116,27 @@ pub enum ConstraintUnitsConfig {
     Relative,
 }
 
+/// The kind of a varifold stage's surface distance (see
+/// `medial_core::attachment::varifold::Kind`).
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum VarifoldKindConfig {
+    /// Unoriented varifold: blind to the orientation of the triangles.
+    #[default]
+    Varifold,
+    /// Oriented varifold (normal kernel width 1).
+    Oriented,
+    /// Current: oriented, linear in the normals.
+    Current,
+}
+
 /// `[[stage]]`.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct StageConfig {
     /// Name used in logs and outputs.
     pub name: String,
-    /// `"ssd"` or `"dice"`.
+    /// `"ssd"`, `"dice"` or `"varifold"`.
     pub attachment: AttachmentKind,
     /// SSD: a mesh with the same points, in the same order, as the template boundary.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -131,10 +148,21 @@ pub struct StageConfig {
     /// Dice: a binary (or labelled) image.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub image: Option<PathBuf>,
+    /// Varifold: the target surface, any triangle mesh (.vtk, .obj, .gltf, .glb; any vertex
+    /// count and order).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub surface: Option<PathBuf>,
+    /// Varifold: `"varifold"` (unoriented), `"oriented"` or `"current"`.
+    #[serde(default)]
+    pub varifold_kind: VarifoldKindConfig,
+    /// Varifold: the spatial kernel width σ_w, mm (default: from the target surface).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub varifold_width: Option<f64>,
     /// Dice: the foreground label (default: every voxel > 0).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub label: Option<f64>,
-    /// Weight of the data term (default 1 for SSD, 100 for Dice).
+    /// Weight of the data term (default 1 for SSD, 100 for Dice; for a varifold it multiplies
+    /// g / ‖T‖², default 100).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub weight: Option<f64>,
     /// Dice: Gaussian smoothing of the image, mm.
@@ -241,6 +269,9 @@ impl StageConfig {
             target: None,
             transform: None,
             image: None,
+            surface: None,
+            varifold_kind: VarifoldKindConfig::default(),
+            varifold_width: None,
             label: None,
             weight: None,
             image_sigma: defaults::image_sigma(),
@@ -266,7 +297,7 @@ impl StageConfig {
     pub fn data_weight(&self) -> f64 {
         self.weight.unwrap_or(match self.attachment {
             AttachmentKind::Ssd => 1.0,
-            AttachmentKind::Dice => 100.0,
+            AttachmentKind::Dice | AttachmentKind::Varifold => 100.0,
         })
     }
 }
@@ -292,10 +323,15 @@ impl Config {
         let join = |p: &mut PathBuf| *p = base.join(&*p);
         join(&mut self.model.template);
         for s in &mut self.stages {
-            [&mut s.target, &mut s.transform, &mut s.image]
-                .into_iter()
-                .flatten()
-                .for_each(join);
+            [
+                &mut s.target,
+                &mut s.transform,
+                &mut s.image,
+                &mut s.surface,
+            ]
+            .into_iter()
+            .flatten()
+            .for_each(join);
         }
     }
 
@@ -334,17 +370,19 @@ impl Config {
 
 impl StageConfig {
     fn check(&self) -> Result<(), String> {
-        let foreign = match self.attachment {
-            AttachmentKind::Ssd => [
-                ("image", self.image.is_some()),
-                ("label", self.label.is_some()),
-            ],
-            AttachmentKind::Dice => [
-                ("target", self.target.is_some()),
-                ("transform", self.transform.is_some()),
-            ],
-        };
-        if let Some((key, _)) = foreign.iter().find(|(_, given)| *given) {
+        use AttachmentKind::{Dice, Ssd, Varifold};
+        let keys = [
+            ("target", self.target.is_some(), Ssd),
+            ("transform", self.transform.is_some(), Ssd),
+            ("image", self.image.is_some(), Dice),
+            ("label", self.label.is_some(), Dice),
+            ("surface", self.surface.is_some(), Varifold),
+            ("varifold_width", self.varifold_width.is_some(), Varifold),
+        ];
+        if let Some((key, _, _)) = keys
+            .iter()
+            .find(|(_, given, owner)| *given && *owner != self.attachment)
+        {
             return Err(format!(
                 "{key} does not apply to attachment = \"{}\"",
                 self.attachment.name()
@@ -370,6 +408,14 @@ impl StageConfig {
                 non_negative("image_sigma", self.image_sigma)?;
                 if self.layers == 0 {
                     return Err("layers must be at least 1".into());
+                }
+            }
+            AttachmentKind::Varifold => {
+                if self.surface.is_none() {
+                    return Err("a varifold stage needs surface (a triangle mesh)".into());
+                }
+                if let Some(w) = self.varifold_width {
+                    positive("varifold_width", w)?;
                 }
             }
         }

@@ -2,11 +2,14 @@
 //! whether the medial constraints apply, the μ schedule and the L-BFGS options; and the figures
 //! reported for a configuration of the model's landmarks.
 
-use crate::config::{AttachmentKind, Config, ConstraintUnitsConfig, MuUpdateConfig, StageConfig};
+use crate::config::{
+    AttachmentKind, Config, ConstraintUnitsConfig, MuUpdateConfig, StageConfig, VarifoldKindConfig,
+};
 use crate::error::CliError;
 use crate::summary::Figures;
 use medial_core::attachment::dice::{DiceAttachment, DiceParams};
 use medial_core::attachment::ssd::Ssd;
+use medial_core::attachment::varifold::{Kind, Varifold, VarifoldParams, DEFAULT_NORMAL_WIDTH};
 use medial_core::attachment::Attachment;
 use medial_core::fit::augmented_lagrangian::{AlSchedule, MuUpdate};
 use medial_core::fit::objective::Evaluation;
@@ -93,19 +96,26 @@ pub fn prepare(stage: &StageConfig, model: &Model) -> Result<Prepared, CliError>
             stage.name
         )));
     }
-    let (attachment, ssd, mask): (Box<dyn Attachment>, _, _) = match stage.attachment {
-        AttachmentKind::Ssd => {
-            let ssd = Ssd::new(ssd_targets(stage, model)?)?;
-            (Box::new(ssd.clone()), Some(ssd), None)
-        }
-        AttachmentKind::Dice => {
-            let (dice, mask) = dice(stage, model)?;
-            (Box::new(dice), None, Some(mask))
-        }
-    };
+    let weight = stage.data_weight();
+    let (attachment, ssd, mask, data_weight): (Box<dyn Attachment>, _, _, _) =
+        match stage.attachment {
+            AttachmentKind::Ssd => {
+                let ssd = Ssd::new(ssd_targets(stage, model)?)?;
+                (Box::new(ssd.clone()), Some(ssd), None, weight)
+            }
+            AttachmentKind::Dice => {
+                let (dice, mask) = dice(stage, model)?;
+                (Box::new(dice), None, Some(mask), weight)
+            }
+            AttachmentKind::Varifold => {
+                let varifold = varifold(stage, model)?;
+                let weight = weight / varifold.target_norm2();
+                (Box::new(varifold), None, None, weight)
+            }
+        };
     Ok(Prepared {
+        data_weight,
         attachment,
-        data_weight: stage.data_weight(),
         ssd,
         mask,
         constraints: constraints(stage, model, constrained)?,
@@ -210,6 +220,33 @@ pub fn read_affine(path: &Path) -> Result<nalgebra::Affine3<f64>, CliError> {
         ));
     }
     Ok(nalgebra::Affine3::from_matrix_unchecked(m))
+}
+
+/// The varifold attachment of a stage: the model's boundary against the stage's surface.
+fn varifold(stage: &StageConfig, model: &Model) -> Result<Varifold, CliError> {
+    let path = stage
+        .surface
+        .as_deref()
+        .expect("checked by the config: varifold has surface");
+    let target = medial_io::mesh::read_mesh(path)?;
+    let kind = match stage.varifold_kind {
+        VarifoldKindConfig::Varifold => Kind::Varifold,
+        VarifoldKindConfig::Oriented => Kind::OrientedVarifold {
+            normal_width: DEFAULT_NORMAL_WIDTH,
+        },
+        VarifoldKindConfig::Current => Kind::Current,
+    };
+    let params = VarifoldParams {
+        kind,
+        width: stage.varifold_width,
+    };
+    Varifold::new(
+        model.boundary_triangles(),
+        model.landmarks().len(),
+        &target,
+        params,
+    )
+    .map_err(|e| CliError::Input(format!("stage '{}': {e}", stage.name)))
 }
 
 /// The Dice attachment of a stage (the image's foreground, smoothed, against the model) and the
