@@ -110,9 +110,10 @@ pub enum MuUpdateConfig {
 #[serde(rename_all = "snake_case")]
 pub enum ConstraintUnitsConfig {
     /// mm², as SPEC §3 and the reference implementation (the paper's μ values carry over).
-    #[default]
     Absolute,
-    /// Divided by the template's spoke and tangent lengths: dimensionless.
+    /// Divided by the template's spoke and tangent lengths: dimensionless, every spoke weighs
+    /// alike (the default; on cmrep's t001 μ needs about 20× its value in mm²).
+    #[default]
     Relative,
 }
 

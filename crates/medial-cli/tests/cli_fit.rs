@@ -144,7 +144,9 @@ fn one_or_two_threads_give_the_same_bits_and_eval_reproduces_the_fit() {
     let dir = tempfile::tempdir().unwrap();
     let config = write_case(
         dir.path(),
-        "constraints = true\nmu = 1.0\nal_iterations = 2\nmax_iterations = 15",
+        // 15 iterations are far from medial; the test is about bits, so the tolerance is wide.
+        "constraints = true\nmu = 1.0\nal_iterations = 2\nmax_iterations = 15\n\
+         tolerance_deg = 180\ntolerance_pct = 1000",
     );
     let (one, two) = (dir.path().join("one"), dir.path().join("two"));
     let s1 = fit(&config, &one, "1");

@@ -213,13 +213,13 @@ const BOUNDARY_AL_ITERATIONS: usize = 4;
 const DICE_AL_ITERATIONS: usize = 6;
 
 impl FitPlan {
-    /// The paper's schedule (`fit.toml`): SSD towards the affine part `affine.txt` (μ = 1, one
+    /// The paper's schedule (`fit.toml`): SSD towards the affine part `affine.txt` (μ = 20, one
     /// AL iteration), then Dice against `target.nii.gz` with the constraints in relative units
     /// and μ = 0.02, 0.2, …, 2000 ([`DICE_AL_ITERATIONS`]).
     pub fn paper_schedule(&self) -> Config {
         let mut affine = StageConfig::new("affine", AttachmentKind::Ssd);
         affine.transform = Some("affine.txt".into());
-        affine.mu = 1.0;
+        affine.mu = 20.0;
         affine.al_iterations = 1;
         affine.max_iterations = self.affine_iterations;
         let mut dice = StageConfig::new("dice", AttachmentKind::Dice);
@@ -265,7 +265,7 @@ impl FitPlan {
 }
 
 /// The comment line of `fit.toml` on its schedule.
-const PAPER_SCHEDULE_NOTE: &str = "# As in the paper: one SSD AL iteration (mu = 1) towards \
+const PAPER_SCHEDULE_NOTE: &str = "# As in the paper: one SSD AL iteration (mu = 20) towards \
 the affine initialisation, then the\n# Dice attachment with mu rising tenfold per AL iteration. \
 The constraints are in relative units\n# (mu = 0.02 ... 2000: on cmrep's t001 about the \
 paper's 0.001 ... 100 in mm²).\n";
