@@ -23,8 +23,9 @@ use exr::prelude::{
     SmallVec, Text,
 };
 use medial_core::image::volume::Volume;
-use nalgebra::Matrix4;
+use nalgebra::{Matrix3x4, Matrix4};
 
+use crate::affine::{from_top_rows, parse_numbers};
 use crate::atomic::write_atomic;
 use crate::{Error, Result};
 
@@ -163,26 +164,15 @@ fn format_affine(m: &Matrix4<f64>) -> String {
 
 /// Parses 12 numbers (three rows of four) into a 4×4 affine map.
 fn parse_affine(text: &str) -> std::result::Result<Matrix4<f64>, String> {
-    let numbers: Vec<f64> = text
-        .split_whitespace()
-        .map(|t| {
-            t.parse::<f64>()
-                .map_err(|_| format!("{AFFINE_ATTRIBUTE}: {t:?} is not a number"))
-        })
-        .collect::<std::result::Result<_, _>>()?;
+    let numbers =
+        parse_numbers(text).map_err(|t| format!("{AFFINE_ATTRIBUTE}: {t:?} is not a number"))?;
     if numbers.len() != 12 {
         return Err(format!(
             "{AFFINE_ATTRIBUTE} has {} numbers, expected 12 (3 rows of 4)",
             numbers.len()
         ));
     }
-    Ok(Matrix4::from_fn(|r, c| {
-        if r < 3 {
-            numbers[4 * r + c]
-        } else {
-            f64::from(u8::from(c == 3))
-        }
-    }))
+    Ok(from_top_rows(&Matrix3x4::from_row_slice(&numbers)))
 }
 
 /// An error of the `exr` crate for `path`: I/O errors stay I/O errors.

@@ -73,6 +73,17 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh> {
     }
 }
 
+/// Reads the points of a mesh or point set, in file order: those of any legacy VTK polydata
+/// (`.vtk`, whatever its cells: a point cloud is fine), else those of [`read_mesh`].
+///
+/// Errors: as [`vtk::read_polydata`] for `.vtk`, else as [`read_mesh`].
+pub fn read_points(path: &Path) -> Result<Vec<Vec3>> {
+    Ok(match MeshFormat::of(path) {
+        Ok(MeshFormat::Vtk) => vtk::read_polydata(path)?.points,
+        _ => read_mesh(path)?.into_parts().0,
+    })
+}
+
 /// Writes a triangle mesh atomically, the format chosen by the extension: `.vtk` (ASCII,
 /// `# vtk DataFile Version 4.2` layout, points as `double`) or `.obj` (`v x y z` lines then
 /// 1-based `f a b c` lines). Coordinates are written in the shortest form that reads back to

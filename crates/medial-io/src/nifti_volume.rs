@@ -25,10 +25,12 @@ use std::path::Path;
 
 use medial_core::image::volume::Volume;
 use medial_core::Vec3;
-use nalgebra::{Matrix3, Matrix4, Quaternion, UnitQuaternion};
+use nalgebra::{Matrix3, Matrix3x4, Matrix4, Quaternion, UnitQuaternion};
 use nifti::writer::WriterOptions;
 use nifti::{Endianness, IntoNdArray, NiftiHeader, NiftiObject, ReaderOptions, XForm};
 
+use crate::affine::from_top_rows;
+use crate::atomic::write_atomic_via_path;
 use crate::{Error, Result};
 
 /// `NIFTI_UNITS_MM` in `xyzt_units`.
@@ -105,27 +107,25 @@ pub fn write_nifti(path: &Path, volume: &Volume, datatype: NiftiType) -> Result<
         Endianness::native(),
     )
     .map_err(|e| nifti_error(path, e))?;
-    let temp = temp_file_beside(path, suffix).map_err(|e| Error::io(path, e))?;
-    let options = WriterOptions::new(temp.path()).reference_header(&header);
-    // The crate writes `ndarray`s; its own volume type converts the raw bytes to one.
-    let written = match datatype {
-        NiftiType::U8 => raw
-            .into_ndarray::<u8>()
-            .and_then(|a| options.write_nifti(&a)),
-        NiftiType::I16 => raw
-            .into_ndarray::<i16>()
-            .and_then(|a| options.write_nifti(&a)),
-        NiftiType::F32 => raw
-            .into_ndarray::<f32>()
-            .and_then(|a| options.write_nifti(&a)),
-        NiftiType::F64 => raw
-            .into_ndarray::<f64>()
-            .and_then(|a| options.write_nifti(&a)),
-    };
-    written.map_err(|e| nifti_error(path, e))?;
-    temp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
-    temp.persist(path).map_err(|e| Error::io(path, e.error))?;
-    Ok(())
+    write_atomic_via_path(path, suffix, |temp| {
+        let options = WriterOptions::new(temp).reference_header(&header);
+        // The crate writes `ndarray`s; its own volume type converts the raw bytes to one.
+        let written = match datatype {
+            NiftiType::U8 => raw
+                .into_ndarray::<u8>()
+                .and_then(|a| options.write_nifti(&a)),
+            NiftiType::I16 => raw
+                .into_ndarray::<i16>()
+                .and_then(|a| options.write_nifti(&a)),
+            NiftiType::F32 => raw
+                .into_ndarray::<f32>()
+                .and_then(|a| options.write_nifti(&a)),
+            NiftiType::F64 => raw
+                .into_ndarray::<f64>()
+                .and_then(|a| options.write_nifti(&a)),
+        };
+        written.map_err(|e| nifti_error(path, e))
+    })
 }
 
 /// The voxel-to-world map of a header: sform, else qform, else the spacings (module doc).
@@ -140,56 +140,36 @@ fn voxel_to_world(header: &NiftiHeader) -> Matrix4<f64> {
     };
     if header.sform_code > 0 {
         let rows = [header.srow_x, header.srow_y, header.srow_z];
-        return Matrix4::from_fn(|r, c| {
-            if r < 3 {
-                f64::from(rows[r][c])
-            } else {
-                f64::from(u8::from(c == 3))
-            }
-        });
+        return from_top_rows(&Matrix3x4::from_fn(|r, c| f64::from(rows[r][c])));
     }
-    if header.qform_code > 0 {
+    let (linear, offset) = if header.qform_code > 0 {
         let qfac = if header.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
         let positive = |i: usize| if spacing(i) > 0.0 { spacing(i) } else { 1.0 };
         let scale = Vec3::new(positive(1), positive(2), qfac * positive(3));
         let rotation = quaternion_rotation(header.quatern_b, header.quatern_c, header.quatern_d);
         let offset = nalgebra::Vector3::new(header.quatern_x, header.quatern_y, header.quatern_z)
             .map(f64::from);
-        return affine(&(rotation * Matrix3::from_diagonal(&scale)), &offset);
-    }
-    affine(
-        &Matrix3::from_diagonal(&Vec3::new(spacing(1), spacing(2), spacing(3))),
-        &Vec3::zeros(),
-    )
-}
-
-/// The rotation of the NIfTI quaternion `(a, b, c, d)`, `a` implied (`nifti_quatern_to_mat44`).
-fn quaternion_rotation(b: f32, c: f32, d: f32) -> Matrix3<f64> {
-    let (mut b, mut c, mut d) = (f64::from(b), f64::from(c), f64::from(d));
-    let rest = 1.0 - (b * b + c * c + d * d);
-    let a = if rest < 1e-7 {
-        // 180° rotation: a = 0, (b, c, d) normalised.
-        let n = (b * b + c * c + d * d).sqrt();
-        (b, c, d) = (b / n, c / n, d / n);
-        0.0
+        (rotation * Matrix3::from_diagonal(&scale), offset)
     } else {
-        rest.sqrt()
+        let scale = Vec3::new(spacing(1), spacing(2), spacing(3));
+        (Matrix3::from_diagonal(&scale), Vec3::zeros())
     };
-    #[rustfmt::skip]
-    let r = Matrix3::new(
-        a * a + b * b - c * c - d * d, 2.0 * (b * c - a * d),         2.0 * (b * d + a * c),
-        2.0 * (b * c + a * d),         a * a + c * c - b * b - d * d, 2.0 * (c * d - a * b),
-        2.0 * (b * d - a * c),         2.0 * (c * d + a * b),         a * a + d * d - c * c - b * b,
-    );
-    r
+    let mut top = linear.insert_column(3, 0.0);
+    top.set_column(3, &offset);
+    from_top_rows(&top)
 }
 
-/// The 4×4 affine map with linear part `a` and offset `t`.
-fn affine(a: &Matrix3<f64>, t: &Vec3) -> Matrix4<f64> {
-    let mut m = Matrix4::identity();
-    m.fixed_view_mut::<3, 3>(0, 0).copy_from(a);
-    m.fixed_view_mut::<3, 1>(0, 3).copy_from(t);
-    m
+/// The rotation of the NIfTI quaternion `(a, b, c, d)`, `a = √(1 − b² − c² − d²)` implied; when
+/// `1 − b² − c² − d² < 10⁻⁷`, `a = 0` and `(b, c, d)` is normalised (a 180° rotation), as in
+/// `nifti_quatern_to_mat44`.
+fn quaternion_rotation(b: f32, c: f32, d: f32) -> Matrix3<f64> {
+    let bcd = nalgebra::Vector3::new(b, c, d).map(f64::from);
+    let rest = 1.0 - bcd.norm_squared();
+    let a = if rest < 1e-7 { 0.0 } else { rest.sqrt() };
+    let q = Quaternion::from_parts(a, bcd);
+    UnitQuaternion::from_quaternion(q)
+        .to_rotation_matrix()
+        .into_inner()
 }
 
 /// `[nx, ny, nz]` from `dim`, refusing a non-trivial fourth or higher dimension.
@@ -338,24 +318,6 @@ fn nifti_quaternion(direction: &Matrix3<f64>) -> (f64, Quaternion<f64>) {
     let rotation = nalgebra::Rotation3::from_matrix_unchecked(r);
     let q = UnitQuaternion::from_rotation_matrix(&rotation).into_inner();
     (qfac, if q.w < 0.0 { -q } else { q })
-}
-
-/// A temporary file `.medial-<random><suffix>` beside `path`, with the permissions of an
-/// ordinary new file. The name has no dot but the leading one and the suffix's: the crate
-/// rebuilds the output name by swapping the last extension, and picks compression from it.
-fn temp_file_beside(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
-    let dir = match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent,
-        _ => Path::new("."),
-    };
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".medial-").suffix(suffix);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o666));
-    }
-    builder.tempfile_in(dir)
 }
 
 /// An error of the `nifti` crate for `path`: I/O errors stay I/O errors.
