@@ -27,6 +27,7 @@ use nalgebra::{Matrix3x4, Matrix4};
 
 use crate::affine::{from_top_rows, parse_numbers};
 use crate::atomic::write_atomic;
+use crate::volume::check_grid;
 use crate::{Error, Result};
 
 /// Name of the `v3i` attribute holding `(nx, ny, nz)`.
@@ -40,7 +41,8 @@ pub const CHANNEL: &str = "Y";
 ///
 /// Errors: [`Error::Io`]/[`Error::Format`] for an unreadable EXR file, several channels none of
 /// which is `Y`, attributes of the wrong type or inconsistent with the image size;
-/// [`Error::Model`] for values or a map the engine refuses (NaN, singular map).
+/// [`Error::Geometry`] for a map that [`check_grid`] refuses (voxel sizes, coplanar axes);
+/// [`Error::Model`] for values the engine refuses (NaN).
 pub fn read_exr_volume(path: &Path) -> Result<Volume> {
     let image = read()
         .no_deep_data()
@@ -99,6 +101,7 @@ pub fn read_exr_volume(path: &Path) -> Result<Volume> {
         }
         None => Matrix4::identity(),
     };
+    check_grid(path, dims, &affine)?;
     Volume::new(dims, data, affine).map_err(|e| Error::model(path, e))
 }
 

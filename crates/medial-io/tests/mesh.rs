@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use medial_core::{TriMesh, Vec3};
-use medial_io::mesh::{read_mesh, write_mesh};
+use medial_io::mesh::{read_mesh, read_points, write_mesh};
 use medial_io::Error;
 
 const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
@@ -318,4 +318,35 @@ fn gltf_non_triangle_mode_is_refused() {
     );
     let message = format_message(read_mesh(&write_file(&dir, "bad.gltf", b"{not json")));
     assert!(message.contains("invalid glTF"), "{message}");
+}
+
+/// The points of any VTK polydata (whatever its cells), else of a mesh format.
+#[test]
+fn read_points_of_polydata_and_meshes() {
+    let dir = tempfile::tempdir().unwrap();
+    let quad = write_file(
+        &dir,
+        "quad.vtk",
+        b"# vtk DataFile Version 4.2\nquad\nASCII\nDATASET POLYDATA\nPOINTS 4 double\n\
+          0 0 0 1 0 0 1 1 0 0 1 0\nPOLYGONS 1 5\n4 0 1 2 3\n",
+    );
+    let points = read_points(&quad).unwrap();
+    assert_eq!(points.len(), 4);
+    assert_eq!(points[2], Vec3::new(1.0, 1.0, 0.0));
+    assert!(read_mesh(&quad).is_err(), "not a triangle mesh");
+    let obj = write_file(&dir, "tetra.OBJ", OBJ_TETRAHEDRON.as_bytes());
+    assert_eq!(
+        read_points(&obj).unwrap(),
+        read_mesh(&obj).unwrap().points()
+    );
+    let sphere = Path::new(DATA).join("cmrep/shooting_test_3d_sphere.vtk");
+    assert_eq!(
+        read_points(&sphere).unwrap(),
+        read_mesh(&sphere).unwrap().points()
+    );
+    let err = read_points(&dir.path().join("points.txt")).unwrap_err();
+    assert!(
+        err.to_string().contains("unknown mesh extension '.txt'"),
+        "{err}"
+    );
 }

@@ -189,11 +189,19 @@ fn truncated_file() {
     write_npy(&path, &[3, 4], &data).expect("write");
     let bytes = std::fs::read(&path).expect("read");
     let cut = write_file(&dir, "cut.npy", &bytes[..bytes.len() - 5]);
-    let message = format_message(read_npy(&cut));
+    let err = read_npy(&cut).unwrap_err();
     assert!(
-        message.contains("truncated") && message.contains("96 bytes"),
-        "{message}"
+        matches!(
+            err,
+            Error::Truncated {
+                needed: 96,
+                available: 91,
+                ..
+            }
+        ),
+        "{err:?}"
     );
+    assert!(err.to_string().contains("truncated") && err.to_string().contains("96 bytes"));
     let header_only = write_file(&dir, "head.npy", &bytes[..20]);
     assert!(format_message(read_npy(&header_only)).contains("invalid .npy header"));
 }

@@ -7,8 +7,10 @@ use std::path::{Path, PathBuf};
 use flate2::write::GzEncoder;
 use medial_core::image::volume::Volume;
 use medial_core::Vec3;
+use medial_io::error::Geometry;
 use medial_io::exr_volume::{read_exr_volume, write_exr_volume, AFFINE_ATTRIBUTE, DIMS_ATTRIBUTE};
 use medial_io::nifti_volume::{read_nifti, write_nifti, NiftiType};
+use medial_io::volume::read_volume;
 use medial_io::Error;
 use nalgebra::{Matrix3, Matrix4, Rotation3, Unit, Vector4};
 
@@ -23,6 +25,8 @@ fn oblique(left_handed: bool) -> Matrix4<f64> {
         .copy_from(&Vec3::new(-91.5, 12.25, 40.0));
     m
 }
+
+const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
 
 fn volume(values: impl Fn(usize) -> f64, affine: Matrix4<f64>) -> Volume {
     let dims = [5, 4, 3];
@@ -243,7 +247,7 @@ fn qform_only_header_gives_the_quaternion_map() {
 fn sform_wins_over_qform_and_spacing_is_the_fallback() {
     let dir = tempfile::tempdir().unwrap();
     let mut h = Header::new([2, 2, 2]);
-    h.pixdim[..4].copy_from_slice(&[1.0, 0.5, 0.0, 2.0]); // pixdim[2] = 0 is taken as 1
+    h.pixdim[..4].copy_from_slice(&[1.0, 0.5, 1.0, 2.0]);
     let v = read_nifti(&h.write(dir.path(), "plain.nii", &[0u8; 8])).unwrap();
     assert!((world(&v, 1.0, 1.0, 1.0) - Vec3::new(0.5, 1.0, 2.0)).norm() < 1e-12);
     h.qform_code = 1;
@@ -289,7 +293,13 @@ fn datatypes_scaling_and_four_dimensions() {
     h.dim = [4, 2, 1, 1, 2, 1, 1, 1];
     let err = read_nifti(&h.write(dir.path(), "t2.nii", &[0; 4])).unwrap_err();
     assert!(
-        matches!(err, Error::Format { .. }) && err.to_string().contains("dimension 4 has size 2"),
+        matches!(
+            err,
+            Error::Geometry {
+                problem: Geometry::ExtraDimension { axis: 4, size: 2 },
+                ..
+            }
+        ) && err.to_string().contains("dimension 4 has size 2"),
         "{err}"
     );
     // Complex voxels: refused.
@@ -311,7 +321,13 @@ fn degenerate_or_invalid_content_is_refused() {
     ];
     let err = read_nifti(&h.write(dir.path(), "flat.nii", &[0; 8])).unwrap_err();
     assert!(
-        matches!(err, Error::Model { .. }) && err.to_string().contains("zero column 1"),
+        matches!(
+            err,
+            Error::Geometry {
+                problem: Geometry::VoxelSize { axis: 2, .. },
+                ..
+            }
+        ),
         "{err}"
     );
     let mut h = Header::new([1, 1, 1]);
@@ -399,4 +415,80 @@ fn exr_without_attributes_is_one_slice() {
     assert_eq!(v.dims(), [3, 2, 1]);
     assert_eq!(v.data(), &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
     assert_eq!(v.voxel_to_world(), &Matrix4::identity());
+}
+
+#[test]
+fn read_volume_chooses_the_format_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let original = volume(|n| n as f64, oblique(false));
+    for name in ["v.nii", "v.nii.gz"] {
+        let path = dir.path().join(name);
+        write_nifti(&path, &original, NiftiType::U8).unwrap();
+        let gzip = std::fs::read(&path).unwrap().starts_with(&[0x1f, 0x8b]);
+        assert_eq!(gzip, name.ends_with(".gz"), "{name}");
+        let back = read_volume(&path).unwrap();
+        assert_eq!(back.data(), original.data(), "{name}");
+        let upper = dir.path().join(format!("upper-{}", name.to_uppercase()));
+        std::fs::copy(&path, &upper).unwrap();
+        assert_eq!(
+            read_volume(&upper).unwrap().data(),
+            original.data(),
+            "{name}"
+        );
+    }
+    let path = dir.path().join("v.exr");
+    write_exr_volume(&path, &original).unwrap();
+    assert_eq!(read_volume(&path).unwrap().data(), original.data());
+    let err = read_volume(&dir.path().join("v.img")).unwrap_err();
+    assert!(matches!(err, Error::Format { .. }), "{err:?}");
+    assert!(
+        err.to_string()
+            .ends_with("v.img: unknown image format: expected .nii, .nii.gz or .exr"),
+        "{err}"
+    );
+}
+
+/// The shipped targets hold the same map as sform and as qform (quaternion): read with the
+/// sform disabled, the quaternion gives the sform's map to the precision of the f32 fields.
+#[test]
+fn shipped_targets_read_the_same_from_qform_and_sform() {
+    let dir = tempfile::tempdir().unwrap();
+    for case in ["toy", "cup", "t001-bent"] {
+        let path = Path::new(EXAMPLES).join(case).join("target.nii.gz");
+        let from_sform = read_nifti(&path).unwrap();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(
+            &mut flate2::read::GzDecoder::new(std::fs::File::open(&path).unwrap()),
+            &mut bytes,
+        )
+        .unwrap();
+        assert_eq!(
+            i16::from_le_bytes([bytes[252], bytes[253]]),
+            1,
+            "{case}: qform_code"
+        );
+        bytes[254..256].copy_from_slice(&0i16.to_le_bytes());
+        let copy = dir.path().join(format!("{case}.nii"));
+        std::fs::write(&copy, &bytes).unwrap();
+        let from_qform = read_nifti(&copy).unwrap();
+        assert_eq!(from_qform.data(), from_sform.data());
+        let scale = from_sform.voxel_to_world().abs().max();
+        assert_affine_close(
+            from_qform.voxel_to_world(),
+            from_sform.voxel_to_world(),
+            1e-6 * scale,
+        );
+    }
+}
+
+/// A quaternion with `b² + c² + d² = 1` is a 180° rotation (`a = 0`).
+#[test]
+fn half_turn_quaternion() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut h = Header::new([2, 2, 2]);
+    h.qform_code = 1;
+    h.quatern = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let v = read_nifti(&h.write(dir.path(), "half.nii", &[0u8; 8])).unwrap();
+    let expected = Matrix4::from_diagonal(&Vector4::new(1.0, -1.0, -1.0, 1.0));
+    assert_affine_close(v.voxel_to_world(), &expected, 1e-15);
 }
