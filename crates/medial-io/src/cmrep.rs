@@ -224,9 +224,13 @@ impl<'a> Arrays<'a> {
         let Some((b_max, &m_max)) = medial_index.iter().enumerate().max_by_key(|(_, &m)| m) else {
             return Ok(Vec::new());
         };
-        let mut first = vec![None; m_max + 1];
+        // n points number at most n atoms: when m_max ≥ n, an atom below n is missing, so the
+        // table never needs more than n slots (a MedialIndex of 1e15 allocates nothing more).
+        let mut first = vec![None; (m_max + 1).min(medial_index.len())];
         for (b, &m) in medial_index.iter().enumerate() {
-            first[m].get_or_insert(b);
+            if let Some(slot) = first.get_mut(m) {
+                slot.get_or_insert(b);
+            }
         }
         first
             .iter()

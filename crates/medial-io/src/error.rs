@@ -95,7 +95,7 @@ pub enum Error {
         problem: String,
     },
     /// The file is well formed but its content is refused by the engine (open mesh, NaN, ...).
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {}", path.display(), one_line(source.to_string()))]
     Model {
         /// The file.
         path: PathBuf,
@@ -185,11 +185,12 @@ pub enum Geometry {
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 impl Error {
-    /// A format error for `path`.
+    /// A format error for `path`; a message of several lines (as some libraries write them) is
+    /// joined into one.
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
         Error::Format {
             path: path.into(),
-            message: message.into(),
+            message: one_line(message.into()),
         }
     }
 
@@ -207,5 +208,14 @@ impl Error {
             path: path.into(),
             source,
         }
+    }
+}
+
+/// `text` on one line: when it has several, their words joined by single spaces.
+fn one_line(text: String) -> String {
+    if text.contains(['\n', '\r']) {
+        text.split_whitespace().collect::<Vec<_>>().join(" ")
+    } else {
+        text
     }
 }

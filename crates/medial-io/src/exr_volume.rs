@@ -17,6 +17,7 @@
 use std::io::Cursor;
 use std::path::Path;
 
+use exr::meta::MetaData;
 use exr::prelude::traits::*;
 use exr::prelude::{
     AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer, LayerAttributes,
@@ -37,20 +38,28 @@ pub const AFFINE_ATTRIBUTE: &str = "medialVoxelToWorld";
 /// Name of the one channel.
 pub const CHANNEL: &str = "Y";
 
+/// The largest ratio of the sample bytes a header declares to the size of the file that is
+/// read: no EXR compression packs pixels much beyond deflate's limit of about 1032:1.
+pub const MAX_COMPRESSION_RATIO: u64 = 4096;
+
 /// Reads a volume written by [`write_exr_volume`] (or a single-channel EXR image as one slice).
 ///
-/// Errors: [`Error::Io`]/[`Error::Format`] for an unreadable EXR file, several channels none of
-/// which is `Y`, attributes of the wrong type or inconsistent with the image size;
+/// Errors: [`Error::Io`] when the file cannot be read; [`Error::Format`] for an invalid EXR
+/// file, several channels none of which is `Y`, attributes of the wrong type or inconsistent
+/// with the image size; [`Error::Truncated`] for a header that declares more samples than the
+/// file can hold (see [`MAX_COMPRESSION_RATIO`]);
 /// [`Error::Geometry`] for a map that [`check_grid`] refuses (voxel sizes, coplanar axes);
 /// [`Error::Model`] for values the engine refuses (NaN).
 pub fn read_exr_volume(path: &Path) -> Result<Volume> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    check_declared_size(&bytes, path)?;
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_file(path)
+        .from_buffered(Cursor::new(bytes.as_slice()))
         .map_err(|e| exr_error(path, e))?;
     let layer = &image.layer_data;
     let (width, height) = (layer.size.width(), layer.size.height());
@@ -178,10 +187,32 @@ fn parse_affine(text: &str) -> std::result::Result<Matrix4<f64>, String> {
     Ok(from_top_rows(&Matrix3x4::from_row_slice(&numbers)))
 }
 
-/// An error of the `exr` crate for `path`: I/O errors stay I/O errors.
-fn exr_error(path: &Path, error: exr::error::Error) -> Error {
-    match error {
-        exr::error::Error::Io(e) => Error::io(path, e),
-        other => Error::format(path, format!("OpenEXR: {other}")),
+/// Refuses a header whose layers declare more sample bytes than [`MAX_COMPRESSION_RATIO`]
+/// times the size of the file: the `exr` crate allocates them before reading any pixel.
+fn check_declared_size(bytes: &[u8], path: &Path) -> Result<()> {
+    let meta = MetaData::read_from_buffered(bytes, false).map_err(|e| exr_error(path, e))?;
+    for header in &meta.headers {
+        let (width, height) = (header.layer_size.width(), header.layer_size.height());
+        let declared = width as u128 * height as u128 * header.channels.bytes_per_pixel as u128;
+        let needed = declared / u128::from(MAX_COMPRESSION_RATIO);
+        if needed > bytes.len() as u128 {
+            return Err(Error::Truncated {
+                path: path.into(),
+                what: format!(
+                    "the {width}×{height} image of {} channels in its header (packed at most \
+                     {MAX_COMPRESSION_RATIO}:1)",
+                    header.channels.list.len()
+                ),
+                needed: u64::try_from(needed).unwrap_or(u64::MAX),
+                available: bytes.len() as u64,
+            });
+        }
     }
+    Ok(())
+}
+
+/// An error of the `exr` crate for `path`. Files are read from memory, so even its I/O errors
+/// (an unexpected end) are about the content.
+fn exr_error(path: &Path, error: exr::error::Error) -> Error {
+    Error::format(path, format!("OpenEXR: {error}"))
 }

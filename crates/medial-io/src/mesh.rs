@@ -216,8 +216,12 @@ fn obj_bytes(mesh: &TriMesh) -> Vec<u8> {
 // glTF.
 
 fn parse_gltf(bytes: &[u8], path: &Path) -> Result<TriMesh> {
-    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(bytes)
-        .map_err(|e| Error::format(path, format!("invalid glTF: {e}")))?;
+    let invalid = |e: gltf::Error| Error::format(path, format!("invalid glTF: {e}"));
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(invalid)?;
+    // The crate's validation itself indexes the POSITION accessors without a check.
+    check_position_indices(document.as_json(), path)?;
+    let document = gltf::Document::from_json(document.into_json()).map_err(invalid)?;
     let buffers = gltf::import_buffers(&document, path.parent(), blob)
         .map_err(|e| Error::format(path, format!("cannot load the glTF buffers: {e}")))?;
     let mut points = Vec::new();
@@ -233,6 +237,32 @@ fn parse_gltf(bytes: &[u8], path: &Path) -> Result<TriMesh> {
         }
     }
     TriMesh::new(points, triangles).map_err(|e| Error::model(path, e))
+}
+
+/// Refuses a `POSITION` attribute that names an accessor the document does not have.
+fn check_position_indices(root: &gltf::json::Root, path: &Path) -> Result<()> {
+    let positions = gltf::json::validation::Checked::Valid(gltf::json::mesh::Semantic::Positions);
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            match primitive.attributes.get(&positions) {
+                Some(index) if index.value() >= root.accessors.len() => {
+                    return Err(Error::Accessor {
+                        path: path.into(),
+                        mesh: m,
+                        primitive: p,
+                        role: "POSITION",
+                        accessor: index.value(),
+                        problem: format!(
+                            "no such accessor (the document has {})",
+                            root.accessors.len()
+                        ),
+                    })
+                }
+                _ => {}
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Every mesh instance with its world transform, in document (depth-first) order.

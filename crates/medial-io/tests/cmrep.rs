@@ -180,6 +180,13 @@ fn broken_medial_indices_are_refused() {
         m.contains("skips atom") && m.contains("500 (at boundary point 5)"),
         "{m}"
     );
+    // An atom number far beyond the points used to size a table by it (an allocation abort).
+    set_point_value(&mut beyond, "MedialIndex", 5, 1e15);
+    let m = refusal(&beyond, false);
+    assert!(
+        m.contains("skips atom") && m.contains("1000000000000000"),
+        "{m}"
+    );
 
     // Give the spokes of one sheet atom to another (4 spokes), renumber the last atom into the
     // gap, and drop Tangency (which would disagree).

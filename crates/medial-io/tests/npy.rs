@@ -6,6 +6,10 @@ use medial_io::npy::{read_npy, write_npy, NpyArray};
 use medial_io::Error;
 use proptest::prelude::*;
 
+#[path = "common/clean.rs"]
+mod clean;
+use clean::assert_clean;
+
 /// A version 1.0 `.npy` file as `numpy.save` writes it: magic, header dict padded with spaces
 /// and a newline to a multiple of 64 bytes, then the raw data.
 fn npy_bytes(descr: &str, fortran_order: bool, shape: &[usize], data: &[u8]) -> Vec<u8> {
@@ -204,6 +208,31 @@ fn truncated_file() {
     assert!(err.to_string().contains("truncated") && err.to_string().contains("96 bytes"));
     let header_only = write_file(&dir, "head.npy", &bytes[..20]);
     assert!(format_message(read_npy(&header_only)).contains("invalid .npy header"));
+}
+
+/// Bytes after the data were ignored: a `.npy` file ends with its data.
+#[test]
+fn trailing_bytes_are_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let data: Vec<u8> = [1.0f64, 2.0].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let mut bytes = npy_bytes("<f8", false, &[2], &data);
+    let exact = write_file(&dir, "exact.npy", &bytes);
+    assert_eq!(read_npy(&exact).expect("exact").data, vec![1.0, 2.0]);
+    bytes.extend_from_slice(b"tail");
+    let path = write_file(&dir, "tail.npy", &bytes);
+    let err = read_npy(&path).unwrap_err();
+    assert_clean(&err, &path);
+    let file_len = bytes.len() as u64;
+    assert!(
+        matches!(err, Error::TrailingBytes { data_end, file_len: n, .. }
+            if data_end == file_len - 4 && n == file_len),
+        "{err:?}"
+    );
+    assert!(
+        err.to_string()
+            .contains("4 bytes after the end of the data"),
+        "{err}"
+    );
 }
 
 #[test]
