@@ -286,16 +286,24 @@ fn mesh_instances<'a>(
                 .collect()
         }
     };
-    let node_count = document.nodes().count();
-    let mut stack: Vec<(gltf::Node, Matrix4<f64>, usize)> = roots
+    let mut stack: Vec<(gltf::Node, Matrix4<f64>)> = roots
         .into_iter()
         .rev()
-        .map(|n| (n, Matrix4::identity(), 0))
+        .map(|n| (n, Matrix4::identity()))
         .collect();
+    let mut visited = HashSet::new();
     let mut instances = Vec::new();
-    while let Some((node, parent, depth)) = stack.pop() {
-        if depth > node_count {
-            return Err(Error::format(path, "the glTF node hierarchy has a cycle"));
+    while let Some((node, parent)) = stack.pop() {
+        // A node reached twice would be instanced again and again (or forever, in a cycle).
+        if !visited.insert(node.index()) {
+            return Err(Error::format(
+                path,
+                format!(
+                    "the glTF node hierarchy has a cycle or a node with several parents: node \
+                     {} is reached twice",
+                    node.index()
+                ),
+            ));
         }
         let columns = node.transform().matrix();
         let world = parent * Matrix4::from_fn(|r, c| f64::from(columns[c][r]));
@@ -307,7 +315,7 @@ fn mesh_instances<'a>(
                 .collect::<Vec<_>>()
                 .into_iter()
                 .rev()
-                .map(|c| (c, world, depth + 1)),
+                .map(|c| (c, world)),
         );
     }
     if instances.is_empty() {

@@ -84,12 +84,11 @@ pub fn read_nifti(path: &Path) -> Result<Volume> {
     let mut bytes = decompressed(path)?;
     let header = parse_header(&bytes, path)?;
     let datatype = check_datatype(&header).map_err(|m| Error::format(path, m))?;
-    let geometry = |problem| Error::Geometry {
+    let dims = spatial_dims(&header, path)?;
+    let affine = voxel_to_world(&header).map_err(|problem| Error::Geometry {
         path: path.into(),
         problem,
-    };
-    let dims = spatial_dims(&header, path)?;
-    let affine = voxel_to_world(&header).map_err(geometry)?;
+    })?;
     check_grid(path, dims, &affine)?;
     let data = voxel_data_range(&header, bytes.len(), dims, datatype, path)?;
     bytes.truncate(data.end);

@@ -408,3 +408,35 @@ fn gltf_sparse_accessors() {
     let (_, _, problem) = accessor_problem(&error);
     assert!(problem.contains("sparse index 2 is 1"), "{problem}");
 }
+
+/// A node reached twice (two parents, or a cycle) would be instanced again and again.
+#[test]
+fn gltf_node_graphs_that_are_not_trees_are_refused() {
+    let first = r#"{"mesh": 0, "translation": [10, 0, 0]}"#;
+    let second = r#"{"mesh": 0, "translation": [0, 1, 0]}"#;
+    for (edit, node) in [
+        // Node 2 gets a second parent, node 0.
+        (
+            (
+                first,
+                r#"{"mesh": 0, "translation": [10, 0, 0], "children": [2]}"#,
+            ),
+            2,
+        ),
+        // Node 2 becomes the parent of its own parent.
+        (
+            (
+                second,
+                r#"{"mesh": 0, "translation": [0, 1, 0], "children": [1]}"#,
+            ),
+            1,
+        ),
+    ] {
+        let error = edited_glb_error(edit);
+        let needle = format!("node {node} is reached twice");
+        assert!(
+            matches!(&error, Error::Format { message, .. } if message.contains(&needle)),
+            "{error}"
+        );
+    }
+}
