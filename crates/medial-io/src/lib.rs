@@ -16,13 +16,13 @@
 //! | [`vtk`] | legacy VTK polydata: ASCII and binary, 3.0/4.x and 5.1 layouts, point and cell arrays | [`vtk::read_polydata`], [`vtk::write_polydata`], [`vtk::PolyData`] |
 //! | [`cmrep`] | cmrep boundary medial templates ⇄ [`MedialTemplate`](medial_core::MedialTemplate) | [`cmrep::read_template`], [`cmrep::write_template`] |
 //! | [`mesh`] | triangle meshes chosen by extension: `.vtk`, `.obj`, `.gltf`/`.glb`; point sets | [`mesh::read_mesh`], [`mesh::write_mesh`], [`mesh::read_points`] |
-//! | [`volume`] | a volume in any supported format, by file name | [`volume::read_volume`] |
+//! | [`volume`] | a volume in any supported format, by file name; the grid checks every volume reader applies | [`volume::read_volume`], [`volume::check_grid`] |
 //! | [`nifti_volume`] | NIfTI-1 volumes (`.nii`, `.nii.gz`) | [`nifti_volume::read_nifti`], [`nifti_volume::write_nifti`] |
 //! | [`exr_volume`] | volumes as OpenEXR images (a column of slices) | [`exr_volume::read_exr_volume`], [`exr_volume::write_exr_volume`] |
 //! | [`npy`] | NumPy `.npy` arrays as `f64` | [`npy::read_npy`], [`npy::write_npy`] |
 //! | [`affine`] | 4×4 affine matrices as text | [`affine::read_affine`], [`affine::write_affine`] |
 //! | [`atomic`] | writing through a temporary file and a rename | [`atomic::write_atomic`], [`atomic::write_atomic_via_path`] |
-//! | [`error`] | the one error type | [`Error`], [`Result`] |
+//! | [`error`] | the one error type, with typed variants for each kind of bad input | [`Error`], [`error::Geometry`], [`Result`] |
 
 #![warn(missing_docs)]
 
