@@ -158,7 +158,7 @@ pub enum Geometry {
     /// [`MIN_VOXEL_SIZE_MM`](crate::volume::MIN_VOXEL_SIZE_MM) ..=
     /// [`MAX_VOXEL_SIZE_MM`](crate::volume::MAX_VOXEL_SIZE_MM).
     #[error(
-        "voxel axis {axis} is {size_mm:e} mm long: voxel sizes from {min:e} to {max:e} mm are \
+        "voxel axis {axis} is {size_mm:.3e} mm long: voxel sizes from {min:e} to {max:e} mm are \
          accepted",
         min = crate::volume::MIN_VOXEL_SIZE_MM,
         max = crate::volume::MAX_VOXEL_SIZE_MM
@@ -172,7 +172,7 @@ pub enum Geometry {
     /// The voxel axes are (nearly) coplanar: the map is singular.
     #[error(
         "the voxel-to-world map is singular: the voxel axes are coplanar (|det| / product of the \
-         voxel sizes = {sine:e}, below {min:e})",
+         voxel sizes = {sine:.1e}, below {min:e})",
         min = crate::volume::MIN_AXIS_SINE
     )]
     Singular {

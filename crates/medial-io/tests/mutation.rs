@@ -19,6 +19,7 @@ use medial_io::vtk::{
 use nalgebra::Matrix4;
 use proptest::prelude::*;
 use proptest::sample::Index;
+use proptest::test_runner::{TestCaseError, TestRunner};
 
 #[path = "common/clean.rs"]
 mod clean;
@@ -75,33 +76,38 @@ fn mutate(valid: &[u8], mutations: &[Mutation]) -> Vec<u8> {
     bytes
 }
 
-/// Writes the mutated file as `name` and reads it with `read`: a panic fails the case (with the
-/// mutations and the panic message), an error must be clean.
-fn check<T: Debug>(
-    name: &str,
-    valid: &[u8],
-    mutations: &[Mutation],
-    read: impl Fn(&Path) -> medial_io::Result<T>,
-) -> Result<(), TestCaseError> {
+/// Reads [`CASES`] mutations of `valid`, each written to a file named `name`, with `read`: a
+/// panic fails the test (with the mutations and the panic message), an error must be clean.
+fn never_panics<T: Debug>(name: &str, valid: &[u8], read: impl Fn(&Path) -> medial_io::Result<T>) {
     let dir = tempfile::tempdir().expect("temp dir");
     let path = dir.path().join(name);
-    std::fs::write(&path, mutate(valid, mutations)).expect("write the mutated file");
-    match catch_unwind(AssertUnwindSafe(|| read(&path))) {
-        Ok(Ok(_)) => Ok(()),
-        Ok(Err(error)) => {
-            clean::assert_clean(&error, &path);
-            Ok(())
+    let config = ProptestConfig {
+        cases: CASES,
+        failure_persistence: None,
+        ..ProptestConfig::default()
+    };
+    let result = TestRunner::new(config).run(&mutations(), |mutations| {
+        std::fs::write(&path, mutate(valid, &mutations)).expect("write the mutated file");
+        match catch_unwind(AssertUnwindSafe(|| read(&path))) {
+            Ok(Ok(_)) => Ok(()),
+            Ok(Err(error)) => {
+                clean::assert_clean(&error, &path);
+                Ok(())
+            }
+            Err(panic) => {
+                let message = panic
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_default();
+                Err(TestCaseError::fail(format!(
+                    "{name} panicked on {mutations:?}: {message}"
+                )))
+            }
         }
-        Err(panic) => {
-            let message = panic
-                .downcast_ref::<String>()
-                .cloned()
-                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
-                .unwrap_or_default();
-            Err(TestCaseError::fail(format!(
-                "{name} panicked on {mutations:?}: {message}"
-            )))
-        }
+    });
+    if let Err(failure) = result {
+        panic!("{failure}");
     }
 }
 
@@ -219,55 +225,57 @@ f -4 -1 -2
 f 2 3 4
 ";
 
-proptest! {
-    #![proptest_config(ProptestConfig {
-        cases: CASES,
-        failure_persistence: None,
-        ..ProptestConfig::default()
-    })]
+#[test]
+fn vtk_ascii() {
+    never_panics("m.vtk", VTK_ASCII.as_bytes(), read_polydata);
+}
 
-    #[test]
-    fn vtk_ascii(m in mutations()) {
-        check("m.vtk", VTK_ASCII.as_bytes(), &m, read_polydata)?;
-    }
+#[test]
+fn vtk_binary() {
+    let options = WriteOptions {
+        encoding: Encoding::Binary,
+        layout: Layout::Offsets,
+    };
+    never_panics(
+        "m.vtk",
+        &polydata_to_bytes(&polydata(), options),
+        read_polydata,
+    );
+}
 
-    #[test]
-    fn vtk_binary(m in mutations()) {
-        let options = WriteOptions { encoding: Encoding::Binary, layout: Layout::Offsets };
-        check("m.vtk", &polydata_to_bytes(&polydata(), options), &m, read_polydata)?;
-    }
+#[test]
+fn cmrep() {
+    let data = template_to_polydata(&medial_core::testing::meshes::bipyramid(0.5));
+    let valid = polydata_to_bytes(&data, WriteOptions::default());
+    never_panics("m.vtk", &valid, read_template);
+}
 
-    #[test]
-    fn cmrep(m in mutations()) {
-        let data = template_to_polydata(&medial_core::testing::meshes::bipyramid(0.5));
-        check("m.vtk", &polydata_to_bytes(&data, WriteOptions::default()), &m, read_template)?;
-    }
+#[test]
+fn obj() {
+    never_panics("m.obj", OBJ.as_bytes(), read_mesh);
+}
 
-    #[test]
-    fn obj(m in mutations()) {
-        check("m.obj", OBJ.as_bytes(), &m, read_mesh)?;
-    }
+#[test]
+fn glb() {
+    never_panics("m.glb", &glb::tetra_glb(), read_mesh);
+}
 
-    #[test]
-    fn glb(m in mutations()) {
-        check("m.glb", &glb::tetra_glb(), &m, read_mesh)?;
-    }
+#[test]
+fn nifti() {
+    let valid = written("v.nii", |p| write_nifti(p, &volume(), NiftiType::F32));
+    never_panics("m.nii", &valid, read_nifti);
+}
 
-    #[test]
-    fn nifti(m in mutations()) {
-        let valid = written("v.nii", |p| write_nifti(p, &volume(), NiftiType::F32));
-        check("m.nii", &valid, &m, read_nifti)?;
-    }
+#[test]
+fn npy() {
+    let valid = written("v.npy", |p| {
+        write_npy(p, &[2, 3], &[0.5, 1.0, 1.5, 2.0, 2.5, 3.0])
+    });
+    never_panics("m.npy", &valid, read_npy);
+}
 
-    #[test]
-    fn npy(m in mutations()) {
-        let valid = written("v.npy", |p| write_npy(p, &[2, 3], &[0.5, 1.0, 1.5, 2.0, 2.5, 3.0]));
-        check("m.npy", &valid, &m, read_npy)?;
-    }
-
-    #[test]
-    fn exr(m in mutations()) {
-        let valid = written("v.exr", |p| write_exr_volume(p, &volume()));
-        check("m.exr", &valid, &m, read_exr_volume)?;
-    }
+#[test]
+fn exr() {
+    let valid = written("v.exr", |p| write_exr_volume(p, &volume()));
+    never_panics("m.exr", &valid, read_exr_volume);
 }
