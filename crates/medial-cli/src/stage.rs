@@ -20,7 +20,6 @@ use medial_core::image::volume::Volume;
 use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
 use medial_core::model::Model;
 use medial_core::{TriMesh, Vec3};
-use std::path::Path;
 
 /// The flow of a config for `landmarks` points.
 pub fn flow_of(config: &Config, landmarks: usize) -> Result<Flow, CliError> {
@@ -161,7 +160,7 @@ fn constraints(
 fn ssd_targets(stage: &StageConfig, model: &Model) -> Result<Vec<Vec3>, CliError> {
     let nb = model.boundary_count();
     if let Some(path) = &stage.transform {
-        let m = read_affine(path)?;
+        let m = medial_io::affine::read_affine(path)?;
         return Ok(model.landmarks()[..nb]
             .iter()
             .map(|p| m.transform_point(&(*p).into()).coords)
@@ -171,7 +170,7 @@ fn ssd_targets(stage: &StageConfig, model: &Model) -> Result<Vec<Vec3>, CliError
         .target
         .as_deref()
         .expect("checked by the config: ssd has target or transform");
-    let points = read_points(path)?;
+    let points = medial_io::mesh::read_points(path)?;
     if points.len() != nb {
         return Err(CliError::Input(format!(
             "stage '{}': target {} has {} points but the template boundary has {nb}; an SSD target needs the same points in the same order",
@@ -181,45 +180,6 @@ fn ssd_targets(stage: &StageConfig, model: &Model) -> Result<Vec<Vec3>, CliError
         )));
     }
     Ok(points)
-}
-
-/// The points of a mesh or point set: any legacy VTK polydata, or a mesh format of
-/// [`medial_io::mesh::read_mesh`].
-fn read_points(path: &Path) -> Result<Vec<Vec3>, CliError> {
-    let is_vtk = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("vtk"));
-    Ok(if is_vtk {
-        medial_io::vtk::read_polydata(path)?.points
-    } else {
-        medial_io::mesh::read_mesh(path)?.into_parts().0
-    })
-}
-
-/// A 4×4 affine matrix from a text file: 16 numbers, row by row, last row `0 0 0 1`.
-pub fn read_affine(path: &Path) -> Result<nalgebra::Affine3<f64>, CliError> {
-    let text = std::fs::read_to_string(path).map_err(|e| CliError::io(path, e))?;
-    let bad = |m: String| CliError::from(medial_io::Error::format(path, m));
-    let numbers: Vec<f64> = text
-        .split_whitespace()
-        .map(|w| {
-            w.parse::<f64>()
-                .map_err(|_| bad(format!("'{w}' is not a number")))
-        })
-        .collect::<Result<_, _>>()?;
-    if numbers.len() != 16 || numbers.iter().any(|x| !x.is_finite()) {
-        return Err(bad(format!(
-            "expected 16 finite numbers (a 4×4 matrix, row by row), found {}",
-            numbers.len()
-        )));
-    }
-    let m = nalgebra::Matrix4::from_row_slice(&numbers);
-    if m.row(3) != nalgebra::RowVector4::new(0.0, 0.0, 0.0, 1.0) {
-        return Err(bad(
-            "the last row of an affine matrix must be 0 0 0 1".into()
-        ));
-    }
-    Ok(nalgebra::Affine3::from_matrix_unchecked(m))
 }
 
 /// The varifold attachment of a stage: the model's boundary against the stage's surface.
@@ -262,7 +222,7 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), 
         .image
         .as_deref()
         .expect("checked by the config: dice has image");
-    let mask = read_volume(path)?.foreground(stage.label);
+    let mask = medial_io::volume::read_volume(path)?.foreground(stage.label);
     let image = mask.smoothed(stage.image_sigma)?;
     let medial_of: Vec<usize> = template
         .medial_index()
@@ -281,22 +241,4 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), 
         params,
     )?;
     Ok((attachment, mask))
-}
-
-/// A volume from NIfTI (`.nii`, `.nii.gz`) or OpenEXR (`.exr`).
-pub fn read_volume(path: &Path) -> Result<medial_core::image::volume::Volume, CliError> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().to_lowercase())
-        .unwrap_or_default();
-    if name.ends_with(".exr") {
-        Ok(medial_io::exr_volume::read_exr_volume(path)?)
-    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
-        Ok(medial_io::nifti_volume::read_nifti(path)?)
-    } else {
-        Err(
-            medial_io::Error::format(path, "unknown image format: expected .nii, .nii.gz or .exr")
-                .into(),
-        )
-    }
 }

@@ -78,7 +78,11 @@ fn a_huge_data_weight_or_a_tiny_kernel_stops_as_unsound_with_the_last_sound_resu
     // The first stage already folds under a kernel 1/200 of the wall's half thickness.
     let s2 = assert_unsound(&tiny, &dir.path().join("tiny"), "affine", "folds");
     println!("sigma 0.01: {}", s2["stages"][0]["unsound"]);
-    assert_eq!(s2["stages"].as_array().unwrap().len(), 1, "later stages do not run");
+    assert_eq!(
+        s2["stages"].as_array().unwrap().len(),
+        1,
+        "later stages do not run"
+    );
 }
 
 #[test]

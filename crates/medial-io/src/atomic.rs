@@ -4,9 +4,15 @@
 //! A reader of the destination sees either the old file or the complete new one, never a
 //! half-written file, and a failure (a write error, a full disk, an error returned by the
 //! caller's writer) leaves an existing destination untouched and creates nothing at it.
+//!
+//! Every file of this crate is written this way: through a writer ([`write_atomic`]) or, for
+//! libraries that open the file themselves, through a temporary path
+//! ([`write_atomic_via_path`]).
 
 use std::io::{BufWriter, Write};
 use std::path::Path;
+
+use tempfile::NamedTempFile;
 
 use crate::{Error, Result};
 
@@ -28,19 +34,54 @@ pub fn write_atomic(
     write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> Result<()> {
     let io_error = |e: std::io::Error| Error::io(path, e);
-    let temp = temp_file_beside(path).map_err(io_error)?;
-    {
+    commit(path, ".tmp", |temp| {
         let mut writer = BufWriter::new(temp.as_file());
         write(&mut writer).map_err(io_error)?;
-        writer.flush().map_err(io_error)?;
-    }
+        writer.flush().map_err(io_error)
+    })
+}
+
+/// Writes a file atomically through a library that needs a path to write to.
+///
+/// `write` receives the path of an empty temporary file in the destination's directory whose
+/// name ends in `suffix` (e.g. `.nii.gz`, for libraries that choose the format by the name),
+/// and must write the whole file there, creating or truncating it in place (not replacing it by
+/// another file). When it returns `Ok`, the file is synced to disk and renamed to `path`; when
+/// it returns `Err`, or any step fails, the temporary file is removed, nothing is created at
+/// `path` and an existing file there is left as it was. Permissions are as for
+/// [`write_atomic`].
+///
+/// Errors: the error returned by `write`; [`Error::Io`] naming `path` when the temporary file
+/// cannot be created, synced or renamed.
+pub fn write_atomic_via_path(
+    path: &Path,
+    suffix: &str,
+    write: impl FnOnce(&Path) -> Result<()>,
+) -> Result<()> {
+    commit(path, suffix, |temp| write(temp.path()))
+}
+
+/// The one rule of both writers: a temporary file beside `path` (see [`temp_file_beside`]),
+/// filled by `fill`, synced and renamed to `path`; removed on any failure (when `temp` drops).
+fn commit(
+    path: &Path,
+    suffix: &str,
+    fill: impl FnOnce(&NamedTempFile) -> Result<()>,
+) -> Result<()> {
+    let io_error = |e: std::io::Error| Error::io(path, e);
+    let temp = temp_file_beside(path, suffix).map_err(io_error)?;
+    fill(&temp)?;
     temp.as_file().sync_all().map_err(io_error)?;
     temp.persist(path).map_err(|e| io_error(e.error))?;
     Ok(())
 }
 
-/// A temporary file named `.<destination name>.<random>.tmp` in the destination's directory.
-fn temp_file_beside(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
+/// A temporary file named `.<destination name>-<random><suffix>` in the destination's
+/// directory, dots of the destination name replaced by `_`, with the permissions of an ordinary
+/// new file. Only `suffix` has dots (besides the leading one): a library that reads the format
+/// from the last extension(s), or swaps the last extension to name its output (the `nifti`
+/// crate does), sees `suffix` and writes at this very path.
+fn temp_file_beside(path: &Path, suffix: &str) -> std::io::Result<NamedTempFile> {
     let dir = match path.parent() {
         Some(parent) if !parent.as_os_str().is_empty() => parent,
         _ => Path::new("."),
@@ -49,9 +90,9 @@ fn temp_file_beside(path: &Path) -> std::io::Result<tempfile::NamedTempFile> {
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let prefix = format!(".{name}.");
+    let prefix = format!(".{}-", name.replace('.', "_"));
     let mut builder = tempfile::Builder::new();
-    builder.prefix(&prefix).suffix(".tmp");
+    builder.prefix(&prefix).suffix(suffix);
     #[cfg(unix)]
     {
         use std::os::unix::fs::PermissionsExt;
@@ -128,6 +169,37 @@ mod tests {
         let path = dir.path().join("no/such/dir/out.txt");
         let err = write_atomic(&path, |w| w.write_all(b"x")).expect_err("no directory");
         assert!(matches!(err, Error::Io { .. }), "{err:?}");
+    }
+
+    #[test]
+    fn via_path_writes_a_file_named_with_the_suffix() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("image.nii.gz");
+        write_atomic_via_path(&path, ".nii.gz", |temp| {
+            let name = temp.file_name().expect("name").to_string_lossy();
+            assert!(name.starts_with(".image_nii_gz-"), "{name}");
+            assert!(name.ends_with(".nii.gz"), "{name}");
+            assert_eq!(name.matches('.').count(), 3, "{name}");
+            std::fs::write(temp, b"data").map_err(|e| Error::io(temp, e))
+        })
+        .expect("write");
+        assert_eq!(std::fs::read(&path).expect("read"), b"data");
+        assert_eq!(leftovers(dir.path()), vec!["image.nii.gz".to_string()]);
+    }
+
+    #[test]
+    fn via_path_failure_keeps_existing_file() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("keep.nii");
+        std::fs::write(&path, b"precious").expect("seed");
+        let err = write_atomic_via_path(&path, ".nii", |temp| {
+            std::fs::write(temp, b"partial").map_err(|e| Error::io(temp, e))?;
+            Err(Error::format(&path, "refused"))
+        })
+        .expect_err("the writer failed");
+        assert!(matches!(err, Error::Format { .. }), "{err:?}");
+        assert_eq!(std::fs::read(&path).expect("read"), b"precious");
+        assert_eq!(leftovers(dir.path()), vec!["keep.nii".to_string()]);
     }
 
     #[cfg(unix)]

@@ -17,7 +17,7 @@ use std::path::Path;
 use medial_core::mesh::Bounds;
 use medial_core::model::metrics::SpokeMetrics;
 use medial_core::model::template::MedialTemplate;
-use medial_core::{TriMesh, Vec3};
+use medial_core::Vec3;
 
 use crate::vtk::{
     read_polydata, write_polydata, ArrayKind, DataArray, PolyData, ValueType, WriteOptions,
@@ -47,18 +47,18 @@ pub fn write_template(path: &Path, template: &MedialTemplate, options: WriteOpti
 
 /// The template held by cmrep polydata (`path` is only used in error messages).
 ///
-/// Errors: [`Error::Format`] for a missing or malformed array (naming it and listing the
-/// arrays the file has), for non-triangle cells, for a file from which medial points cannot be
-/// placed (neither `MedialPoint` nor `Radius` with normals), for inconsistent `MedialPoint`
-/// values of one atom, a non-unit normal or a negative radius, and for a `Tangency` that
-/// disagrees with the spoke counts (naming the atom); [`Error::Model`] when the engine refuses
-/// the template (open or inward mesh, atom with no or more than 3 spokes, …).
+/// Errors: as [`PolyData::to_trimesh`] for the boundary mesh (non-triangle cells, a mesh
+/// [`TriMesh`](medial_core::TriMesh) refuses); [`Error::Format`] for a missing or malformed
+/// array (naming it and listing the arrays the file has), for a file from which medial points
+/// cannot be placed (neither `MedialPoint` nor `Radius` with normals), for inconsistent
+/// `MedialPoint` values of one atom, a non-unit normal or a negative radius, and for a
+/// `Tangency` that disagrees with the spoke counts (naming the atom); [`Error::Model`] when the
+/// engine refuses the template (open or inward mesh, atom with no or more than 3 spokes, …).
 pub fn template_from_polydata(data: &PolyData, path: &Path) -> Result<MedialTemplate> {
-    let triangles = data.triangles().map_err(|m| Error::format(path, m))?;
+    let mesh = data.to_trimesh(path)?;
     let arrays = Arrays { data, path };
     let medial_index = arrays.integers(arrays.required("MedialIndex", 1)?)?;
     let medial_points = arrays.medial_points(&medial_index)?;
-    let mesh = TriMesh::new(data.points.clone(), triangles).map_err(|e| Error::model(path, e))?;
     let template = MedialTemplate::new(mesh, medial_index, medial_points)
         .map_err(|e| Error::model(path, e))?;
     arrays.check_tangency(&template)?;
@@ -77,15 +77,8 @@ pub fn template_to_polydata(template: &MedialTemplate) -> PolyData {
     let medial = |b: usize| q[template.atom_landmark(atoms[b])];
     let metrics = SpokeMetrics::compute(template, q);
     let normals = template.tangents().normals(q);
-    let mut data = PolyData {
-        points: template.boundary_points().to_vec(),
-        polygons: template
-            .boundary_triangles()
-            .iter()
-            .map(|t| t.to_vec())
-            .collect(),
-        ..PolyData::default()
-    };
+    let mut data =
+        PolyData::from_triangles(template.boundary_points(), template.boundary_triangles());
     let spoke_counts = atoms.iter().map(|&m| template.spokes(m).len() as f64);
     data.point_data = vec![
         array(
@@ -232,9 +225,13 @@ impl<'a> Arrays<'a> {
         let Some((b_max, &m_max)) = medial_index.iter().enumerate().max_by_key(|(_, &m)| m) else {
             return Ok(Vec::new());
         };
-        let mut first = vec![None; m_max + 1];
+        // n points number at most n atoms: when m_max ≥ n, an atom below n is missing, so the
+        // table never needs more than n slots (a MedialIndex of 1e15 allocates nothing more).
+        let mut first = vec![None; (m_max + 1).min(medial_index.len())];
         for (b, &m) in medial_index.iter().enumerate() {
-            first[m].get_or_insert(b);
+            if let Some(slot) = first.get_mut(m) {
+                slot.get_or_insert(b);
+            }
         }
         first
             .iter()

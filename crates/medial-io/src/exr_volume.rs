@@ -17,15 +17,18 @@
 use std::io::Cursor;
 use std::path::Path;
 
+use exr::meta::MetaData;
 use exr::prelude::traits::*;
 use exr::prelude::{
     AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, Layer, LayerAttributes,
     SmallVec, Text,
 };
 use medial_core::image::volume::Volume;
-use nalgebra::Matrix4;
+use nalgebra::{Matrix3x4, Matrix4};
 
+use crate::affine::{from_top_rows, parse_numbers};
 use crate::atomic::write_atomic;
+use crate::volume::check_grid;
 use crate::{Error, Result};
 
 /// Name of the `v3i` attribute holding `(nx, ny, nz)`.
@@ -35,19 +38,28 @@ pub const AFFINE_ATTRIBUTE: &str = "medialVoxelToWorld";
 /// Name of the one channel.
 pub const CHANNEL: &str = "Y";
 
+/// The largest ratio of the sample bytes a header declares to the size of the file that is
+/// read: no EXR compression packs pixels much beyond deflate's limit of about 1032:1.
+pub const MAX_COMPRESSION_RATIO: u64 = 4096;
+
 /// Reads a volume written by [`write_exr_volume`] (or a single-channel EXR image as one slice).
 ///
-/// Errors: [`Error::Io`]/[`Error::Format`] for an unreadable EXR file, several channels none of
-/// which is `Y`, attributes of the wrong type or inconsistent with the image size;
-/// [`Error::Model`] for values or a map the engine refuses (NaN, singular map).
+/// Errors: [`Error::Io`] when the file cannot be read; [`Error::Format`] for an invalid EXR
+/// file, several channels none of which is `Y`, attributes of the wrong type or inconsistent
+/// with the image size; [`Error::Truncated`] for a header that declares more samples than the
+/// file can hold (see [`MAX_COMPRESSION_RATIO`]);
+/// [`Error::Geometry`] for a map that [`check_grid`] refuses (voxel sizes, coplanar axes);
+/// [`Error::Model`] for values the engine refuses (NaN).
 pub fn read_exr_volume(path: &Path) -> Result<Volume> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    check_declared_size(&bytes, path)?;
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_file(path)
+        .from_buffered(Cursor::new(bytes.as_slice()))
         .map_err(|e| exr_error(path, e))?;
     let layer = &image.layer_data;
     let (width, height) = (layer.size.width(), layer.size.height());
@@ -98,6 +110,7 @@ pub fn read_exr_volume(path: &Path) -> Result<Volume> {
         }
         None => Matrix4::identity(),
     };
+    check_grid(path, dims, &affine)?;
     Volume::new(dims, data, affine).map_err(|e| Error::model(path, e))
 }
 
@@ -163,32 +176,43 @@ fn format_affine(m: &Matrix4<f64>) -> String {
 
 /// Parses 12 numbers (three rows of four) into a 4×4 affine map.
 fn parse_affine(text: &str) -> std::result::Result<Matrix4<f64>, String> {
-    let numbers: Vec<f64> = text
-        .split_whitespace()
-        .map(|t| {
-            t.parse::<f64>()
-                .map_err(|_| format!("{AFFINE_ATTRIBUTE}: {t:?} is not a number"))
-        })
-        .collect::<std::result::Result<_, _>>()?;
+    let numbers =
+        parse_numbers(text).map_err(|t| format!("{AFFINE_ATTRIBUTE}: {t:?} is not a number"))?;
     if numbers.len() != 12 {
         return Err(format!(
             "{AFFINE_ATTRIBUTE} has {} numbers, expected 12 (3 rows of 4)",
             numbers.len()
         ));
     }
-    Ok(Matrix4::from_fn(|r, c| {
-        if r < 3 {
-            numbers[4 * r + c]
-        } else {
-            f64::from(u8::from(c == 3))
-        }
-    }))
+    Ok(from_top_rows(&Matrix3x4::from_row_slice(&numbers)))
 }
 
-/// An error of the `exr` crate for `path`: I/O errors stay I/O errors.
-fn exr_error(path: &Path, error: exr::error::Error) -> Error {
-    match error {
-        exr::error::Error::Io(e) => Error::io(path, e),
-        other => Error::format(path, format!("OpenEXR: {other}")),
+/// Refuses a header whose layers declare more sample bytes than [`MAX_COMPRESSION_RATIO`]
+/// times the size of the file: the `exr` crate allocates them before reading any pixel.
+fn check_declared_size(bytes: &[u8], path: &Path) -> Result<()> {
+    let meta = MetaData::read_from_buffered(bytes, false).map_err(|e| exr_error(path, e))?;
+    for header in &meta.headers {
+        let (width, height) = (header.layer_size.width(), header.layer_size.height());
+        let declared = width as u128 * height as u128 * header.channels.bytes_per_pixel as u128;
+        let needed = declared / u128::from(MAX_COMPRESSION_RATIO);
+        if needed > bytes.len() as u128 {
+            return Err(Error::Truncated {
+                path: path.into(),
+                what: format!(
+                    "the {width}×{height} image of {} channels in its header (packed at most \
+                     {MAX_COMPRESSION_RATIO}:1)",
+                    header.channels.list.len()
+                ),
+                needed: u64::try_from(needed).unwrap_or(u64::MAX),
+                available: bytes.len() as u64,
+            });
+        }
     }
+    Ok(())
+}
+
+/// An error of the `exr` crate for `path`. Files are read from memory, so even its I/O errors
+/// (an unexpected end) are about the content.
+fn exr_error(path: &Path, error: exr::error::Error) -> Error {
+    Error::format(path, format!("OpenEXR: {error}"))
 }

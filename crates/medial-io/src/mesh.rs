@@ -7,9 +7,11 @@
 //! triangulated behind the user's back.
 
 use std::collections::HashSet;
+use std::fmt::Display;
 use std::io::Write as _;
 use std::path::Path;
 
+use gltf::accessor::{DataType, Dimensions};
 use medial_core::{TriMesh, Vec3};
 use nalgebra::{Matrix4, Point3};
 
@@ -71,6 +73,17 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh> {
         MeshFormat::Obj => parse_obj(&read_bytes(path)?, path),
         MeshFormat::Gltf => parse_gltf(&read_bytes(path)?, path),
     }
+}
+
+/// Reads the points of a mesh or point set, in file order: those of any legacy VTK polydata
+/// (`.vtk`, whatever its cells: a point cloud is fine), else those of [`read_mesh`].
+///
+/// Errors: as [`vtk::read_polydata`] for `.vtk`, else as [`read_mesh`].
+pub fn read_points(path: &Path) -> Result<Vec<Vec3>> {
+    Ok(match MeshFormat::of(path) {
+        Ok(MeshFormat::Vtk) => vtk::read_polydata(path)?.points,
+        _ => read_mesh(path)?.into_parts().0,
+    })
 }
 
 /// Writes a triangle mesh atomically, the format chosen by the extension: `.vtk` (ASCII,
@@ -203,35 +216,53 @@ fn obj_bytes(mesh: &TriMesh) -> Vec<u8> {
 // glTF.
 
 fn parse_gltf(bytes: &[u8], path: &Path) -> Result<TriMesh> {
-    let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(bytes)
-        .map_err(|e| Error::format(path, format!("invalid glTF: {e}")))?;
+    let invalid = |e: gltf::Error| Error::format(path, format!("invalid glTF: {e}"));
+    let gltf::Gltf { document, blob } =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(invalid)?;
+    // The crate's validation itself indexes the POSITION accessors without a check.
+    check_position_indices(document.as_json(), path)?;
+    let document = gltf::Document::from_json(document.into_json()).map_err(invalid)?;
     let buffers = gltf::import_buffers(&document, path.parent(), blob)
         .map_err(|e| Error::format(path, format!("cannot load the glTF buffers: {e}")))?;
     let mut points = Vec::new();
     let mut triangles = Vec::new();
     for (mesh, transform) in mesh_instances(&document, path)? {
         for primitive in mesh.primitives() {
-            add_primitive(
-                &mut points,
-                &mut triangles,
-                &primitive,
-                &buffers,
-                &transform,
-            )
-            .map_err(|m| {
-                let name = mesh.name().map(|n| format!(" '{n}'")).unwrap_or_default();
-                Error::format(
-                    path,
-                    format!(
-                        "mesh {}{name}, primitive {}: {m}",
-                        mesh.index(),
-                        primitive.index()
-                    ),
-                )
-            })?;
+            let at = PrimitiveAt {
+                path,
+                mesh: &mesh,
+                primitive: &primitive,
+            };
+            add_primitive(&mut points, &mut triangles, &at, &buffers, &transform)?;
         }
     }
     TriMesh::new(points, triangles).map_err(|e| Error::model(path, e))
+}
+
+/// Refuses a `POSITION` attribute that names an accessor the document does not have.
+fn check_position_indices(root: &gltf::json::Root, path: &Path) -> Result<()> {
+    let positions = gltf::json::validation::Checked::Valid(gltf::json::mesh::Semantic::Positions);
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            match primitive.attributes.get(&positions) {
+                Some(index) if index.value() >= root.accessors.len() => {
+                    return Err(Error::Accessor {
+                        path: path.into(),
+                        mesh: m,
+                        primitive: p,
+                        role: "POSITION",
+                        accessor: index.value(),
+                        problem: format!(
+                            "no such accessor (the document has {})",
+                            root.accessors.len()
+                        ),
+                    })
+                }
+                _ => {}
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Every mesh instance with its world transform, in document (depth-first) order.
@@ -255,16 +286,24 @@ fn mesh_instances<'a>(
                 .collect()
         }
     };
-    let node_count = document.nodes().count();
-    let mut stack: Vec<(gltf::Node, Matrix4<f64>, usize)> = roots
+    let mut stack: Vec<(gltf::Node, Matrix4<f64>)> = roots
         .into_iter()
         .rev()
-        .map(|n| (n, Matrix4::identity(), 0))
+        .map(|n| (n, Matrix4::identity()))
         .collect();
+    let mut visited = HashSet::new();
     let mut instances = Vec::new();
-    while let Some((node, parent, depth)) = stack.pop() {
-        if depth > node_count {
-            return Err(Error::format(path, "the glTF node hierarchy has a cycle"));
+    while let Some((node, parent)) = stack.pop() {
+        // A node reached twice would be instanced again and again (or forever, in a cycle).
+        if !visited.insert(node.index()) {
+            return Err(Error::format(
+                path,
+                format!(
+                    "the glTF node hierarchy has a cycle or a node with several parents: node \
+                     {} is reached twice",
+                    node.index()
+                ),
+            ));
         }
         let columns = node.transform().matrix();
         let world = parent * Matrix4::from_fn(|r, c| f64::from(columns[c][r]));
@@ -276,7 +315,7 @@ fn mesh_instances<'a>(
                 .collect::<Vec<_>>()
                 .into_iter()
                 .rev()
-                .map(|c| (c, world, depth + 1)),
+                .map(|c| (c, world)),
         );
     }
     if instances.is_empty() {
@@ -288,20 +327,97 @@ fn mesh_instances<'a>(
     Ok(instances)
 }
 
+/// A primitive of a glTF file, for error messages.
+struct PrimitiveAt<'a> {
+    /// The file.
+    path: &'a Path,
+    /// The mesh holding the primitive.
+    mesh: &'a gltf::Mesh<'a>,
+    /// The primitive.
+    primitive: &'a gltf::Primitive<'a>,
+}
+
+impl PrimitiveAt<'_> {
+    /// A format error naming the mesh (and its name) and the primitive.
+    fn format_error(&self, message: impl Display) -> Error {
+        let name = self
+            .mesh
+            .name()
+            .map(|n| format!(" '{n}'"))
+            .unwrap_or_default();
+        Error::format(
+            self.path,
+            format!(
+                "mesh {}{name}, primitive {}: {message}",
+                self.mesh.index(),
+                self.primitive.index()
+            ),
+        )
+    }
+
+    /// Checks that `accessor`, used as `role`, has one of the element `types` and lies in its
+    /// buffers (see [`accessor_problem`]).
+    fn check_accessor(
+        &self,
+        role: &'static str,
+        accessor: &gltf::Accessor,
+        types: &[ElementType],
+        buffers: &[gltf::buffer::Data],
+    ) -> Result<()> {
+        match accessor_problem(accessor, types, buffers) {
+            None => Ok(()),
+            Some(problem) => Err(Error::Accessor {
+                path: self.path.into(),
+                mesh: self.mesh.index(),
+                primitive: self.primitive.index(),
+                role,
+                accessor: accessor.index(),
+                problem,
+            }),
+        }
+    }
+}
+
+/// The component type and the number of components of an accessor's elements.
+type ElementType = (DataType, Dimensions);
+
+/// What a `POSITION` accessor may hold: 3 floats.
+const POSITION_TYPES: [ElementType; 1] = [(DataType::F32, Dimensions::Vec3)];
+
+/// What an `indices` accessor may hold: unsigned integers of 8, 16 or 32 bits.
+const INDEX_TYPES: [ElementType; 3] = [
+    (DataType::U8, Dimensions::Scalar),
+    (DataType::U16, Dimensions::Scalar),
+    (DataType::U32, Dimensions::Scalar),
+];
+
 /// Appends the vertices (transformed) and triangles of one `TRIANGLES` primitive.
+///
+/// The accessors are checked before the `gltf` crate reads them: its reader panics on an
+/// element type it does not expect and trusts counts, offsets and strides.
 fn add_primitive(
     points: &mut Vec<Vec3>,
     triangles: &mut Vec<[usize; 3]>,
-    primitive: &gltf::Primitive,
+    at: &PrimitiveAt,
     buffers: &[gltf::buffer::Data],
     transform: &Matrix4<f64>,
-) -> std::result::Result<(), String> {
+) -> Result<()> {
+    let primitive = at.primitive;
     let mode = primitive.mode();
     if mode != gltf::mesh::Mode::Triangles {
-        return Err(format!("mode {mode:?} is not supported, only TRIANGLES"));
+        return Err(at.format_error(format!("mode {mode:?} is not supported, only TRIANGLES")));
+    }
+    let position = primitive
+        .get(&gltf::Semantic::Positions)
+        .ok_or_else(|| at.format_error("no POSITION attribute"))?;
+    at.check_accessor("POSITION", &position, &POSITION_TYPES, buffers)?;
+    if let Some(indices) = primitive.indices() {
+        at.check_accessor("indices", &indices, &INDEX_TYPES, buffers)?;
     }
     let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| d.0.as_slice()));
-    let positions = reader.read_positions().ok_or("no POSITION attribute")?;
+    let positions = reader
+        .read_positions()
+        .ok_or_else(|| at.format_error("no POSITION attribute"))?;
     let base = points.len();
     points.extend(positions.map(|[x, y, z]| {
         let p = Point3::new(f64::from(x), f64::from(y), f64::from(z));
@@ -313,12 +429,12 @@ fn add_primitive(
         None => (0..count).collect(),
     };
     if indices.len() % 3 != 0 {
-        return Err(format!("{} indices, not a multiple of 3", indices.len()));
+        return Err(at.format_error(format!("{} indices, not a multiple of 3", indices.len())));
     }
     if let Some(bad) = indices.iter().find(|&&i| i >= count) {
-        return Err(format!(
+        return Err(at.format_error(format!(
             "index {bad} but the primitive has {count} vertices"
-        ));
+        )));
     }
     let mirrored = transform.fixed_view::<3, 3>(0, 0).determinant() < 0.0;
     triangles.extend(indices.chunks_exact(3).map(|t| {
@@ -330,4 +446,130 @@ fn add_primitive(
         }
     }));
     Ok(())
+}
+
+/// Why the `gltf` crate cannot safely read `accessor` as one of `types`, if it cannot: another
+/// element type, no element, no data (neither a buffer view nor sparse values), elements
+/// outside their buffer view or a view outside its buffer, a stride below the element size, or
+/// sparse indices that do not strictly increase below the count.
+fn accessor_problem(
+    accessor: &gltf::Accessor,
+    types: &[ElementType],
+    buffers: &[gltf::buffer::Data],
+) -> Option<String> {
+    let element = (accessor.data_type(), accessor.dimensions());
+    if !types.contains(&element) {
+        let expected: Vec<String> = types
+            .iter()
+            .map(|(t, d)| format!("{d:?} of {t:?}"))
+            .collect();
+        return Some(format!(
+            "elements are {:?} of {:?}; expected {}",
+            element.1,
+            element.0,
+            expected.join(", ")
+        ));
+    }
+    let count = accessor.count();
+    if count == 0 {
+        return Some("count is 0".into());
+    }
+    let size = accessor.size();
+    let sparse = accessor.sparse();
+    match accessor.view() {
+        Some(view) => {
+            if let Err(problem) = elements(&view, accessor.offset(), count, size, buffers) {
+                return Some(problem);
+            }
+        }
+        None if sparse.is_none() => {
+            return Some("no bufferView and no sparse values: no data".into());
+        }
+        None => {}
+    }
+    let sparse = sparse?;
+    let n = sparse.count();
+    if n == 0 || n > count {
+        return Some(format!(
+            "{n} sparse values for {count} elements (1 to {count} allowed)"
+        ));
+    }
+    let values = sparse.values();
+    if let Err(problem) = elements(&values.view(), values.offset(), n, size, buffers) {
+        return Some(format!("sparse values: {problem}"));
+    }
+    let indices = sparse.indices();
+    let index_size = indices.index_type().size();
+    let (bytes, stride) = match elements(&indices.view(), indices.offset(), n, index_size, buffers)
+    {
+        Ok(found) => found,
+        Err(problem) => return Some(format!("sparse indices: {problem}")),
+    };
+    let index = |i: usize| {
+        let b = &bytes[i * stride..i * stride + index_size];
+        b.iter()
+            .rev()
+            .fold(0usize, |v, &byte| v << 8 | usize::from(byte))
+    };
+    let mut previous = None;
+    for i in 0..n {
+        let current = index(i);
+        if current >= count || previous.is_some_and(|p| current <= p) {
+            return Some(format!(
+                "sparse index {i} is {current}: sparse indices must increase strictly and stay \
+                 below the count {count}"
+            ));
+        }
+        previous = Some(current);
+    }
+    None
+}
+
+/// The bytes of `count ≥ 1` elements of `size` bytes from byte `offset` of `view` (each
+/// `view.stride()` bytes apart, or packed), from the first to the end of the last, and the
+/// stride; or why they do not lie in the view, or the view in its buffer.
+fn elements<'a>(
+    view: &gltf::buffer::View,
+    offset: usize,
+    count: usize,
+    size: usize,
+    buffers: &'a [gltf::buffer::Data],
+) -> std::result::Result<(&'a [u8], usize), String> {
+    let stride = view.stride().unwrap_or(size);
+    if stride < size {
+        return Err(format!(
+            "buffer view {} has byteStride {stride}, below the element size {size}",
+            view.index()
+        ));
+    }
+    let buffer = view.buffer().index();
+    let view_bytes = buffers
+        .get(buffer)
+        .and_then(|data| {
+            data.0
+                .get(view.offset()..view.offset().checked_add(view.length())?)
+        })
+        .ok_or_else(|| {
+            format!(
+                "buffer view {} (bytes {} to {}) lies outside buffer {buffer} ({} bytes)",
+                view.index(),
+                view.offset(),
+                view.offset().saturating_add(view.length()),
+                buffers.get(buffer).map_or(0, |d| d.0.len())
+            )
+        })?;
+    (count - 1)
+        .checked_mul(stride)
+        .and_then(|n| n.checked_add(size))
+        .and_then(|n| n.checked_add(offset))
+        .and_then(|end| view_bytes.get(offset..end))
+        .map(|bytes| (bytes, stride))
+        .ok_or_else(|| {
+            format!(
+                "{count} elements of {size} bytes (stride {stride}) from byte {offset} do not fit \
+                 buffer view {} ({} bytes)",
+                view.index(),
+                view_bytes.len()
+            )
+        })
 }

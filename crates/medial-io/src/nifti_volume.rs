@@ -7,12 +7,17 @@
 //! - else `qform_code > 0`: `R · diag(dx, dy, qfac·dz)` and offset `(qoffset_x, y, z)`, with `R`
 //!   the rotation of the unit quaternion `(a, b, c, d)`, `a = √(1 − b² − c² − d²)` (if
 //!   `1 − b² − c² − d² < 10⁻⁷`, `a = 0` and `(b, c, d)` is normalised), `qfac = −1` if
-//!   `pixdim[0] < 0` else `+1`, and a non-positive spacing taken as 1 (method 2);
+//!   `pixdim[0] < 0` else `+1` (method 2);
 //! - else `diag(dx, dy, dz)` with no offset (method 1).
 //!
-//! A spacing `pixdim[i]` that is 0 or not finite is taken as 1, as in `nifti1_io.c`. Volumes
-//! of 1 to 3 dimensions are read (missing dimensions have size 1); higher dimensions must have
-//! size 1 (a 4-D file with one time point is fine).
+//! Refused, as they can only give garbage: a voxel spacing `pixdim[1..=3]` that is not a
+//! positive finite number where the map is built from it (methods 1 and 2; `nifti1_io.c` takes
+//! it as 1), a grid that [`check_grid`] refuses (voxel sizes outside 10⁻⁴ … 10⁴ mm, coplanar
+//! axes, non-finite entries), images that are not 3-D (`dim[0] < 3`, or a fourth to seventh
+//! dimension above 1: a 4-D file with one volume is fine), a dimension below 1, a `vox_offset`
+//! that does not place the data in the file, and data shorter than the header declares. A
+//! 1×1×1 volume is read. The data start at `vox_offset` (at least 352, after the header and
+//! its 4-byte extender); the file may be gzip-compressed whatever its name.
 //!
 //! **Writing** ([`write_nifti`]): the sform holds the affine map with `sform_code = 1`
 //! (`NIFTI_XFORM_SCANNER_ANAT`); when the voxel axes are orthogonal the qform holds the same
@@ -21,18 +26,34 @@
 //! 32-bit floats, so the map is stored to about 7 significant digits. The file is written to a
 //! temporary file beside the destination and renamed into place; a `.gz` name is compressed.
 
+use std::io::Read as _;
+use std::ops::Range;
 use std::path::Path;
 
 use medial_core::image::volume::Volume;
 use medial_core::Vec3;
-use nalgebra::{Matrix3, Matrix4, Quaternion, UnitQuaternion};
+use nalgebra::{Matrix3, Matrix3x4, Matrix4, Quaternion, UnitQuaternion};
 use nifti::writer::WriterOptions;
-use nifti::{Endianness, IntoNdArray, NiftiHeader, NiftiObject, ReaderOptions, XForm};
+use nifti::{Endianness, IntoNdArray, NiftiHeader, XForm};
 
+use crate::affine::from_top_rows;
+use crate::atomic::write_atomic_via_path;
+use crate::error::Geometry;
+use crate::volume::check_grid;
 use crate::{Error, Result};
 
 /// `NIFTI_UNITS_MM` in `xyzt_units`.
 const UNITS_MM: u8 = 2;
+
+/// Bytes of a NIfTI-1 header (`sizeof_hdr`).
+const HEADER_BYTES: usize = 348;
+
+/// The earliest start of the voxel data of a single-file NIfTI-1: after the header and its
+/// 4-byte extender.
+const MIN_DATA_OFFSET: usize = 352;
+
+/// The first two bytes of a gzip stream.
+const GZIP_MAGIC: [u8; 2] = [0x1f, 0x8b];
 
 /// Tolerance on `|DᵀD − I|` (D the normalised direction matrix) for writing a qform.
 const ORTHOGONAL_TOLERANCE: f64 = 1e-6;
@@ -50,22 +71,38 @@ pub enum NiftiType {
     F64,
 }
 
-/// Reads a `.nii` or `.nii.gz` volume (see the module doc for the world coordinates).
+/// Reads a `.nii` or `.nii.gz` volume (see the module doc for the world coordinates and what
+/// is refused).
 ///
-/// Errors: [`Error::Io`] if the file cannot be opened, [`Error::Format`] for an unreadable
-/// header or data, an unsupported datatype (complex, RGB, …) or more than 3 non-trivial
-/// dimensions, [`Error::Model`] for values or an affine map the engine refuses (NaN voxels, a
-/// singular map).
+/// Errors: [`Error::Io`] if the file cannot be read; [`Error::Format`] for a file that is not
+/// NIfTI-1 (or not valid gzip), a header-only file (magic `ni1`), an unsupported datatype
+/// (complex, RGB, …) or a `dim[0]` above 7; [`Error::Truncated`] for a file shorter than its
+/// header or data; [`Error::DataOffset`] for a `vox_offset` outside the file;
+/// [`Error::Geometry`] for a grid that cannot place voxels in the world; [`Error::Model`] for
+/// values the engine refuses (NaN voxels).
 pub fn read_nifti(path: &Path) -> Result<Volume> {
-    let object = ReaderOptions::new()
-        .read_file(path)
-        .map_err(|e| nifti_error(path, e))?;
-    let header = object.header().clone();
-    let dims = spatial_dims(&header).map_err(|m| Error::format(path, m))?;
-    check_datatype(&header).map_err(|m| Error::format(path, m))?;
-    let affine = voxel_to_world(&header);
-    let array = object
-        .into_volume()
+    let mut bytes = decompressed(path)?;
+    let header = parse_header(&bytes, path)?;
+    let datatype = check_datatype(&header).map_err(|m| Error::format(path, m))?;
+    let dims = spatial_dims(&header, path)?;
+    let affine = voxel_to_world(&header).map_err(|problem| Error::Geometry {
+        path: path.into(),
+        problem,
+    })?;
+    check_grid(path, dims, &affine)?;
+    let data = voxel_data_range(&header, bytes.len(), dims, datatype, path)?;
+    bytes.truncate(data.end);
+    bytes.drain(..data.start);
+    let volume = nifti::InMemNiftiVolume::from_raw_fields(
+        header.dim,
+        datatype,
+        header.scl_slope,
+        header.scl_inter,
+        bytes,
+        header.endianness,
+    )
+    .map_err(|e| nifti_error(path, e))?;
+    let array = volume
         .into_ndarray::<f64>()
         .map_err(|e| nifti_error(path, e))?;
     // NIfTI data are in Fortran order (x fastest), as are the arrays the crate builds: the
@@ -76,6 +113,73 @@ pub fn read_nifti(path: &Path) -> Result<Volume> {
         return Err(Error::format(path, "voxel data are not contiguous"));
     }
     Volume::new(dims, data, affine).map_err(|e| Error::model(path, e))
+}
+
+/// The bytes of the file, decompressed if they are gzip (by their magic number, not the name).
+fn decompressed(path: &Path) -> Result<Vec<u8>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if !bytes.starts_with(&GZIP_MAGIC) {
+        return Ok(bytes);
+    }
+    let mut out = Vec::new();
+    flate2::read::GzDecoder::new(bytes.as_slice())
+        .read_to_end(&mut out)
+        .map_err(|e| Error::format(path, format!("invalid gzip data: {e}")))?;
+    Ok(out)
+}
+
+/// The header of a single-file NIfTI-1 image.
+fn parse_header(bytes: &[u8], path: &Path) -> Result<NiftiHeader> {
+    if bytes.len() < HEADER_BYTES {
+        return Err(Error::Truncated {
+            path: path.into(),
+            what: "a NIfTI-1 header".into(),
+            needed: HEADER_BYTES as u64,
+            available: bytes.len() as u64,
+        });
+    }
+    let header = NiftiHeader::from_reader(bytes).map_err(|e| nifti_error(path, e))?;
+    if header.magic != *b"n+1\0" {
+        return Err(Error::format(
+            path,
+            "the header keeps its voxels in a separate .img file (magic 'ni1'); only \
+             single-file NIfTI-1 (.nii) is read",
+        ));
+    }
+    Ok(header)
+}
+
+/// Where the voxel data lie in the (decompressed) file of `len` bytes: from `vox_offset` (at
+/// least [`MIN_DATA_OFFSET`]) for `nx·ny·nz` values of `datatype`.
+fn voxel_data_range(
+    header: &NiftiHeader,
+    len: usize,
+    dims: [usize; 3],
+    datatype: nifti::NiftiType,
+    path: &Path,
+) -> Result<Range<usize>> {
+    let vox_offset = header.vox_offset;
+    if !(vox_offset >= 0.0 && f64::from(vox_offset) <= len as f64) {
+        return Err(Error::DataOffset {
+            path: path.into(),
+            field: "vox_offset",
+            offset: f64::from(vox_offset),
+            file_len: len as u64,
+        });
+    }
+    let start = (vox_offset as usize).max(MIN_DATA_OFFSET);
+    let needed = dims.iter().product::<usize>() * datatype.size_of();
+    let available = len.saturating_sub(start);
+    if available < needed {
+        let [nx, ny, nz] = dims;
+        return Err(Error::Truncated {
+            path: path.into(),
+            what: format!("a {nx}×{ny}×{nz} volume of {datatype:?} from byte {start}"),
+            needed: needed as u64,
+            available: available as u64,
+        });
+    }
+    Ok(start..start + needed)
 }
 
 /// Writes `volume` as `.nii` or `.nii.gz` (by the file name) with voxel type `datatype` (see
@@ -105,116 +209,114 @@ pub fn write_nifti(path: &Path, volume: &Volume, datatype: NiftiType) -> Result<
         Endianness::native(),
     )
     .map_err(|e| nifti_error(path, e))?;
-    let temp = temp_file_beside(path, suffix).map_err(|e| Error::io(path, e))?;
-    let options = WriterOptions::new(temp.path()).reference_header(&header);
-    // The crate writes `ndarray`s; its own volume type converts the raw bytes to one.
-    let written = match datatype {
-        NiftiType::U8 => raw
-            .into_ndarray::<u8>()
-            .and_then(|a| options.write_nifti(&a)),
-        NiftiType::I16 => raw
-            .into_ndarray::<i16>()
-            .and_then(|a| options.write_nifti(&a)),
-        NiftiType::F32 => raw
-            .into_ndarray::<f32>()
-            .and_then(|a| options.write_nifti(&a)),
-        NiftiType::F64 => raw
-            .into_ndarray::<f64>()
-            .and_then(|a| options.write_nifti(&a)),
-    };
-    written.map_err(|e| nifti_error(path, e))?;
-    temp.as_file().sync_all().map_err(|e| Error::io(path, e))?;
-    temp.persist(path).map_err(|e| Error::io(path, e.error))?;
-    Ok(())
+    write_atomic_via_path(path, suffix, |temp| {
+        let options = WriterOptions::new(temp).reference_header(&header);
+        // The crate writes `ndarray`s; its own volume type converts the raw bytes to one.
+        let written = match datatype {
+            NiftiType::U8 => raw
+                .into_ndarray::<u8>()
+                .and_then(|a| options.write_nifti(&a)),
+            NiftiType::I16 => raw
+                .into_ndarray::<i16>()
+                .and_then(|a| options.write_nifti(&a)),
+            NiftiType::F32 => raw
+                .into_ndarray::<f32>()
+                .and_then(|a| options.write_nifti(&a)),
+            NiftiType::F64 => raw
+                .into_ndarray::<f64>()
+                .and_then(|a| options.write_nifti(&a)),
+        };
+        written.map_err(|e| nifti_error(path, e))
+    })
 }
 
 /// The voxel-to-world map of a header: sform, else qform, else the spacings (module doc).
-fn voxel_to_world(header: &NiftiHeader) -> Matrix4<f64> {
-    let spacing = |i: usize| {
-        let d = f64::from(header.pixdim[i]);
-        if d == 0.0 || !d.is_finite() {
-            1.0
-        } else {
-            d
-        }
-    };
+///
+/// Errors: [`Geometry::Spacing`] for a spacing `pixdim[1..=3]` that the map is built from
+/// (qform or spacings) and that is not a positive finite number.
+fn voxel_to_world(header: &NiftiHeader) -> std::result::Result<Matrix4<f64>, Geometry> {
     if header.sform_code > 0 {
         let rows = [header.srow_x, header.srow_y, header.srow_z];
-        return Matrix4::from_fn(|r, c| {
-            if r < 3 {
-                f64::from(rows[r][c])
-            } else {
-                f64::from(u8::from(c == 3))
-            }
-        });
+        return Ok(from_top_rows(&Matrix3x4::from_fn(|r, c| {
+            f64::from(rows[r][c])
+        })));
     }
-    if header.qform_code > 0 {
+    let spacing = |axis: usize| match header.pixdim[axis] {
+        d if d.is_finite() && d > 0.0 => Ok(f64::from(d)),
+        value => Err(Geometry::Spacing { axis, value }),
+    };
+    let scale = Vec3::new(spacing(1)?, spacing(2)?, spacing(3)?);
+    let (linear, offset) = if header.qform_code > 0 {
         let qfac = if header.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
-        let positive = |i: usize| if spacing(i) > 0.0 { spacing(i) } else { 1.0 };
-        let scale = Vec3::new(positive(1), positive(2), qfac * positive(3));
         let rotation = quaternion_rotation(header.quatern_b, header.quatern_c, header.quatern_d);
         let offset = nalgebra::Vector3::new(header.quatern_x, header.quatern_y, header.quatern_z)
             .map(f64::from);
-        return affine(&(rotation * Matrix3::from_diagonal(&scale)), &offset);
-    }
-    affine(
-        &Matrix3::from_diagonal(&Vec3::new(spacing(1), spacing(2), spacing(3))),
-        &Vec3::zeros(),
-    )
-}
-
-/// The rotation of the NIfTI quaternion `(a, b, c, d)`, `a` implied (`nifti_quatern_to_mat44`).
-fn quaternion_rotation(b: f32, c: f32, d: f32) -> Matrix3<f64> {
-    let (mut b, mut c, mut d) = (f64::from(b), f64::from(c), f64::from(d));
-    let rest = 1.0 - (b * b + c * c + d * d);
-    let a = if rest < 1e-7 {
-        // 180° rotation: a = 0, (b, c, d) normalised.
-        let n = (b * b + c * c + d * d).sqrt();
-        (b, c, d) = (b / n, c / n, d / n);
-        0.0
+        let scale = Vec3::new(scale.x, scale.y, qfac * scale.z);
+        (rotation * Matrix3::from_diagonal(&scale), offset)
     } else {
-        rest.sqrt()
+        (Matrix3::from_diagonal(&scale), Vec3::zeros())
     };
-    #[rustfmt::skip]
-    let r = Matrix3::new(
-        a * a + b * b - c * c - d * d, 2.0 * (b * c - a * d),         2.0 * (b * d + a * c),
-        2.0 * (b * c + a * d),         a * a + c * c - b * b - d * d, 2.0 * (c * d - a * b),
-        2.0 * (b * d - a * c),         2.0 * (c * d + a * b),         a * a + d * d - c * c - b * b,
-    );
-    r
+    let mut top = linear.insert_column(3, 0.0);
+    top.set_column(3, &offset);
+    Ok(from_top_rows(&top))
 }
 
-/// The 4×4 affine map with linear part `a` and offset `t`.
-fn affine(a: &Matrix3<f64>, t: &Vec3) -> Matrix4<f64> {
-    let mut m = Matrix4::identity();
-    m.fixed_view_mut::<3, 3>(0, 0).copy_from(a);
-    m.fixed_view_mut::<3, 1>(0, 3).copy_from(t);
-    m
+/// The rotation of the NIfTI quaternion `(a, b, c, d)`, `a = √(1 − b² − c² − d²)` implied; when
+/// `1 − b² − c² − d² < 10⁻⁷`, `a = 0` and `(b, c, d)` is normalised (a 180° rotation), as in
+/// `nifti_quatern_to_mat44`.
+fn quaternion_rotation(b: f32, c: f32, d: f32) -> Matrix3<f64> {
+    let bcd = nalgebra::Vector3::new(b, c, d).map(f64::from);
+    let rest = 1.0 - bcd.norm_squared();
+    let a = if rest < 1e-7 { 0.0 } else { rest.sqrt() };
+    let q = Quaternion::from_parts(a, bcd);
+    UnitQuaternion::from_quaternion(q)
+        .to_rotation_matrix()
+        .into_inner()
 }
 
-/// `[nx, ny, nz]` from `dim`, refusing a non-trivial fourth or higher dimension.
-fn spatial_dims(header: &NiftiHeader) -> std::result::Result<[usize; 3], String> {
-    let dim = header
-        .dim()
-        .map_err(|e| format!("invalid dimensions {:?}: {e}", header.dim))?;
-    if let Some((n, &size)) = dim.iter().enumerate().skip(3).find(|&(_, &s)| s != 1) {
-        return Err(format!(
-            "dimension {} has size {size}: only 3-D volumes (or 4-D with one time point) are \
-             supported",
-            n + 1
+/// `[nx, ny, nz]` from `dim`: at least 3 dimensions, none below 1, the fourth to seventh of
+/// size 1. Sizes are the header's signed 16-bit integers.
+///
+/// Errors: [`Error::Format`] for a `dim[0]` above 7, else [`Error::Geometry`].
+fn spatial_dims(header: &NiftiHeader, path: &Path) -> Result<[usize; 3]> {
+    let ndim = usize::from(header.dim[0]);
+    if ndim > 7 {
+        return Err(Error::format(
+            path,
+            format!("dim[0] is {ndim}: a NIfTI-1 image has 1 to 7 dimensions"),
         ));
     }
-    Ok(std::array::from_fn(|a| {
-        dim.get(a).map_or(1, |&s| usize::from(s))
-    }))
+    let size = |axis: usize| i64::from(header.dim[axis] as i16);
+    let problem = if ndim < 3 {
+        Some(Geometry::TooFewDimensions { ndim })
+    } else if let Some(axis) = (1..=ndim).find(|&a| size(a) < 1) {
+        Some(Geometry::EmptyDimension {
+            axis,
+            size: size(axis),
+        })
+    } else {
+        (4..=ndim)
+            .find(|&a| size(a) > 1)
+            .map(|axis| Geometry::ExtraDimension {
+                axis,
+                size: size(axis) as usize,
+            })
+    };
+    match problem {
+        Some(problem) => Err(Error::Geometry {
+            path: path.into(),
+            problem,
+        }),
+        None => Ok([1, 2, 3].map(|a| size(a) as usize)),
+    }
 }
 
-/// Refuses datatypes that are not real scalars.
-fn check_datatype(header: &NiftiHeader) -> std::result::Result<(), String> {
+/// The datatype, refusing those that are not real scalars.
+fn check_datatype(header: &NiftiHeader) -> std::result::Result<nifti::NiftiType, String> {
     use nifti::NiftiType as T;
     match header.data_type() {
         Ok(
-            T::Uint8
+            t @ (T::Uint8
             | T::Int8
             | T::Uint16
             | T::Int16
@@ -223,8 +325,8 @@ fn check_datatype(header: &NiftiHeader) -> std::result::Result<(), String> {
             | T::Uint64
             | T::Int64
             | T::Float32
-            | T::Float64,
-        ) => Ok(()),
+            | T::Float64),
+        ) => Ok(t),
         Ok(other) => Err(format!(
             "unsupported voxel type {other:?}: need integers or reals"
         )),
@@ -338,24 +440,6 @@ fn nifti_quaternion(direction: &Matrix3<f64>) -> (f64, Quaternion<f64>) {
     let rotation = nalgebra::Rotation3::from_matrix_unchecked(r);
     let q = UnitQuaternion::from_rotation_matrix(&rotation).into_inner();
     (qfac, if q.w < 0.0 { -q } else { q })
-}
-
-/// A temporary file `.medial-<random><suffix>` beside `path`, with the permissions of an
-/// ordinary new file. The name has no dot but the leading one and the suffix's: the crate
-/// rebuilds the output name by swapping the last extension, and picks compression from it.
-fn temp_file_beside(path: &Path, suffix: &str) -> std::io::Result<tempfile::NamedTempFile> {
-    let dir = match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent,
-        _ => Path::new("."),
-    };
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(".medial-").suffix(suffix);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o666));
-    }
-    builder.tempfile_in(dir)
 }
 
 /// An error of the `nifti` crate for `path`: I/O errors stay I/O errors.

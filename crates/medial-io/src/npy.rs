@@ -26,8 +26,9 @@ pub struct NpyArray {
 
 /// Reads a `.npy` file (see the module documentation for the accepted dtypes).
 ///
-/// Errors: [`Error::Io`] when the file cannot be read; [`Error::Format`] for a malformed header,
-/// an unsupported dtype, or data shorter than the header declares.
+/// Errors: [`Error::Io`] when the file cannot be read; [`Error::Format`] for a malformed header
+/// or an unsupported dtype; [`Error::Truncated`] for data shorter than the header declares,
+/// [`Error::TrailingBytes`] for bytes after them (a `.npy` file ends with its data).
 pub fn read_npy(path: &Path) -> Result<NpyArray> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     parse_npy(&bytes, path)
@@ -90,14 +91,26 @@ fn parse_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
             )))
         }
     };
-    let count = element_count(&shape);
-    let needed = count.and_then(|n| n.checked_mul(type_str.size_field() as usize));
-    if !needed.is_some_and(|needed| needed <= data_bytes.len()) {
-        return Err(format_error(format!(
-            "truncated: shape {shape:?} of {type_str} needs {} bytes of data, the file has {}",
-            needed.map_or("too many".to_string(), |n| n.to_string()),
-            data_bytes.len()
-        )));
+    let needed = element_count(&shape)
+        .and_then(|n| n.checked_mul(type_str.size_field() as usize))
+        .and_then(|n| u64::try_from(n).ok())
+        .unwrap_or(u64::MAX);
+    let available = data_bytes.len() as u64;
+    if needed > available {
+        return Err(Error::Truncated {
+            path: path.into(),
+            what: format!("shape {shape:?} of {type_str}"),
+            needed,
+            available,
+        });
+    }
+    if needed < available {
+        let file_len = bytes.len() as u64;
+        return Err(Error::TrailingBytes {
+            path: path.into(),
+            data_end: file_len - (available - needed),
+            file_len,
+        });
     }
     let order = header.order();
     let file = NpyFile::with_header(header, data_bytes);

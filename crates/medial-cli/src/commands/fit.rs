@@ -33,7 +33,9 @@ pub struct FitOptions {
 /// `summary.json`'s `status`) and then returns the error that says so.
 pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
     let model = medial_io::model::read_model(&config.model.template)?;
-    let guard = Guard::new(&model);
+    // Constrained and Dice stages rely on the medial points staying inside (Dice samples the
+    // prisms); the others only on the boundary surface.
+    let (prisms, surface) = (Guard::new(&model), Guard::of_surface(&model));
     let flow = flow_of(config, model.landmarks().len())?;
     let prepared = config
         .stages
@@ -49,7 +51,11 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
                 attachment: p.attachment.as_ref(),
                 data_weight: p.data_weight,
                 constraints: p.constraints.as_ref().map(|c| c as &dyn ConstraintSet),
-                guard: Some(&guard),
+                guard: Some(if p.constraints.is_some() || p.mask.is_some() {
+                    &prisms
+                } else {
+                    &surface
+                }),
             },
             schedule: p.schedule,
             lbfgs: p.lbfgs,

@@ -49,7 +49,7 @@ pub fn run(args: &RasterizeArgs) -> Result<(), CliError> {
     let mesh = medial_io::mesh::read_mesh(&args.mesh)?;
     let (dims, voxel_to_world) = match (&args.like, args.spacing) {
         (Some(like), _) => {
-            let image = crate::stage::read_volume(like)?;
+            let image = medial_io::volume::read_volume(like)?;
             (image.dims(), *image.voxel_to_world())
         }
         (None, Some(spacing)) => grid_around(&mesh, spacing, args.margin)?,

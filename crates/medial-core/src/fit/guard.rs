@@ -9,8 +9,9 @@
 //!   medial points `(m₀, m₁, m₂)` of its atoms bound a prism, cut into the tetrahedra
 //!   `(b₀ b₁ b₂ m₀)`, `(b₁ b₂ m₀ m₁)`, `(b₂ m₀ m₁ m₂)`; a prism is folded when the sum of their
 //!   signed volumes `det[p₁ − p₀, p₂ − p₀, p₃ − p₀] / 6` has the opposite sign of the same sum
-//!   at `t = 0`. For a plain mesh a triangle is inverted when its normal
-//!   `(p_b − p_a) × (p_c − p_a)` turns against its normal at `t = 0` (negative dot product).
+//!   at `t = 0`. For a plain mesh, or the boundary alone ([`Guard::of_surface`]), a triangle is
+//!   inverted when its normal `(p_b − p_a) × (p_c − p_a)` turns against its normal at `t = 0`
+//!   (negative dot product).
 //!
 //! The checks cost `O(triangles)` per iterate: nothing against one evaluation.
 
@@ -96,21 +97,28 @@ enum Cells {
 }
 
 impl Guard {
-    /// The fold test of `model` at its landmarks.
+    /// The fold test of `model` at its landmarks: its prisms for a medial template, its
+    /// triangles for a plain mesh.
     pub fn new(model: &Model) -> Self {
         match model {
             Model::Medial(t) => Self::of_template(t),
-            Model::Plain(mesh) => {
-                let p = mesh.points();
-                let cells = mesh
-                    .triangles()
-                    .iter()
-                    .map(|&t| (t, normal(p, t)))
-                    .collect();
-                Self {
-                    cells: Cells::Triangles(cells),
-                }
-            }
+            Model::Plain(_) => Self::of_surface(model),
+        }
+    }
+
+    /// The fold test of `model`'s boundary surface alone: its triangles must not invert. For
+    /// stages whose objective does not rely on the medial points staying inside (a medial
+    /// template fitted without constraints to points or a surface), where the prisms may fold
+    /// as the medial axis drifts.
+    pub fn of_surface(model: &Model) -> Self {
+        let p = model.landmarks();
+        let cells = model
+            .boundary_triangles()
+            .iter()
+            .map(|&t| (t, normal(p, t)))
+            .collect();
+        Self {
+            cells: Cells::Triangles(cells),
         }
     }
 

@@ -12,7 +12,6 @@
 use super::{CaseFiles, FitPlan, SynthArgs, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE};
 use crate::error::CliError;
 use crate::output::{model_error, print_json, TemplateSummary};
-use crate::stage::read_affine;
 use medial_core::mesh::topology::signed_volume;
 use medial_core::model::template::MedialTemplate;
 use medial_core::synth::{
@@ -281,7 +280,7 @@ fn build_warp(args: &Options<'_>, axes: &PrincipalAxes) -> Result<Warp, CliError
     })?;
     match args.affine {
         Some(path) => {
-            let affine = read_affine(path)?.into_inner();
+            let affine = medial_io::affine::read_affine(path)?.into_inner();
             bent.with_affine(&affine).map_err(|e| model_error(path, e))
         }
         None => Ok(bent.with_affine(&default_affine(axes.centre))?),

@@ -168,22 +168,12 @@ impl CaseFiles<'_> {
             &PolyData::from_trimesh(self.target_boundary),
             write_options(false),
         )?;
-        write_text(&out("affine.txt"), &affine_text(&self.affine))?;
+        medial_io::affine::write_affine(&out("affine.txt"), &self.affine)?;
         for (name, text) in self.configs {
             write_text(&out(name), text)?;
         }
         Ok(())
     }
-}
-
-/// A 4×4 matrix as 4 lines of 4 numbers (the format of an SSD stage's `transform`).
-fn affine_text(m: &Matrix4<f64>) -> String {
-    m.row_iter()
-        .map(|row| {
-            let cells: Vec<String> = row.iter().map(|v| format!("{v:.12}")).collect();
-            cells.join(" ") + "\n"
-        })
-        .collect()
 }
 
 /// The fit settings of a case's configs.

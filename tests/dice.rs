@@ -4,15 +4,15 @@
 
 use std::time::Instant;
 
-use medial_core::attachment::dice::{DiceAttachment, DiceParams, DiceValue};
-use medial_core::image::rasterize::{self, grid_around, rasterize};
-use medial_core::image::volume::Volume;
-use medial_core::{TriMesh, Vec3};
+use medial::attachment::dice::{DiceAttachment, DiceParams, DiceValue};
+use medial::image::rasterize::{self, grid_around, rasterize};
+use medial::image::volume::Volume;
+use medial::{TriMesh, Vec3};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/cmrep/");
+const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/cmrep/");
 
 /// A medial model: landmarks (boundary points first), outward boundary triangles, and the
 /// landmark index of the medial point of every boundary point.
@@ -666,12 +666,12 @@ fn voxel_dice_counts_overlapping_voxels() {
     assert!(d > 0.6 && d < 0.95, "{d}");
 }
 
-/// The attachment built from `medial_io::cmrep::read_template` (the path the CLI takes) sees
+/// The attachment built from `medial::io::cmrep::read_template` (the path the CLI takes) sees
 /// the same model as the test's own reader.
 #[test]
 fn attachment_from_the_cmrep_reader() {
     let path = std::path::Path::new(DATA).join("t001_template_bcmrep.vtk");
-    let template = medial_io::cmrep::read_template(&path).unwrap();
+    let template = medial::io::cmrep::read_template(&path).unwrap();
     let medial_of: Vec<usize> = template
         .medial_index()
         .iter()

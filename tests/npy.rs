@@ -2,9 +2,13 @@
 
 use std::path::Path;
 
-use medial_io::npy::{read_npy, write_npy, NpyArray};
-use medial_io::Error;
+use medial::io::npy::{read_npy, write_npy, NpyArray};
+use medial::io::Error;
 use proptest::prelude::*;
+
+#[path = "common/clean.rs"]
+mod clean;
+use clean::assert_clean;
 
 /// A version 1.0 `.npy` file as `numpy.save` writes it: magic, header dict padded with spaces
 /// and a newline to a multiple of 64 bytes, then the raw data.
@@ -44,7 +48,7 @@ fn write_file(dir: &tempfile::TempDir, name: &str, bytes: &[u8]) -> std::path::P
     path
 }
 
-fn format_message(result: medial_io::Result<NpyArray>) -> String {
+fn format_message(result: medial::io::Result<NpyArray>) -> String {
     match result {
         Err(Error::Format { message, .. }) => message,
         other => panic!("expected a format error, got {other:?}"),
@@ -189,13 +193,46 @@ fn truncated_file() {
     write_npy(&path, &[3, 4], &data).expect("write");
     let bytes = std::fs::read(&path).expect("read");
     let cut = write_file(&dir, "cut.npy", &bytes[..bytes.len() - 5]);
-    let message = format_message(read_npy(&cut));
+    let err = read_npy(&cut).unwrap_err();
     assert!(
-        message.contains("truncated") && message.contains("96 bytes"),
-        "{message}"
+        matches!(
+            err,
+            Error::Truncated {
+                needed: 96,
+                available: 91,
+                ..
+            }
+        ),
+        "{err:?}"
     );
+    assert!(err.to_string().contains("truncated") && err.to_string().contains("96 bytes"));
     let header_only = write_file(&dir, "head.npy", &bytes[..20]);
     assert!(format_message(read_npy(&header_only)).contains("invalid .npy header"));
+}
+
+/// Bytes after the data were ignored: a `.npy` file ends with its data.
+#[test]
+fn trailing_bytes_are_refused() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let data: Vec<u8> = [1.0f64, 2.0].iter().flat_map(|v| v.to_le_bytes()).collect();
+    let mut bytes = npy_bytes("<f8", false, &[2], &data);
+    let exact = write_file(&dir, "exact.npy", &bytes);
+    assert_eq!(read_npy(&exact).expect("exact").data, vec![1.0, 2.0]);
+    bytes.extend_from_slice(b"tail");
+    let path = write_file(&dir, "tail.npy", &bytes);
+    let err = read_npy(&path).unwrap_err();
+    assert_clean(&err, &path);
+    let file_len = bytes.len() as u64;
+    assert!(
+        matches!(err, Error::TrailingBytes { data_end, file_len: n, .. }
+            if data_end == file_len - 4 && n == file_len),
+        "{err:?}"
+    );
+    assert!(
+        err.to_string()
+            .contains("4 bytes after the end of the data"),
+        "{err}"
+    );
 }
 
 #[test]

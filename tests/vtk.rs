@@ -2,15 +2,15 @@
 
 use std::path::{Path, PathBuf};
 
-use medial_core::Vec3;
-use medial_io::vtk::{
+use medial::io::vtk::{
     parse_polydata, polydata_to_bytes, read_polydata, read_trimesh, write_polydata, write_trimesh,
     ArrayKind, DataArray, Encoding, Layout, PolyData, ValueType, WriteOptions,
 };
-use medial_io::Error;
+use medial::io::Error;
+use medial::Vec3;
 use proptest::prelude::*;
 
-const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
+const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data");
 
 fn data_file(name: &str) -> PathBuf {
     Path::new(DATA).join(name)
@@ -27,11 +27,11 @@ fn all_options() -> [WriteOptions; 4] {
     options
 }
 
-fn parse_str(text: &str) -> medial_io::Result<PolyData> {
+fn parse_str(text: &str) -> medial::io::Result<PolyData> {
     parse_polydata(text.as_bytes(), Path::new("test.vtk"))
 }
 
-fn format_message(result: medial_io::Result<PolyData>) -> String {
+fn format_message(result: medial::io::Result<PolyData>) -> String {
     match result {
         Err(Error::Format { message, .. }) => message,
         other => panic!("expected a format error, got {other:?}"),

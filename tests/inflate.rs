@@ -5,15 +5,15 @@ use std::collections::{BTreeMap, HashMap};
 use std::f64::consts::PI;
 use std::path::Path;
 
-use medial_core::build::inflate::{inflate, Inflated, MedialSheet};
-use medial_core::mesh::topology::{signed_volume, MeshDefect};
-use medial_core::synth::parameter_grid;
-use medial_core::{Error, Vec3};
+use medial::build::inflate::{inflate, Inflated, MedialSheet};
+use medial::mesh::topology::{signed_volume, MeshDefect};
+use medial::synth::parameter_grid;
+use medial::{Error, Vec3};
 use proptest::prelude::*;
 
-use medial_core::testing::meshes::octahedron;
+use medial::testing::meshes::octahedron;
 
-const CMREP: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/cmrep/");
+const CMREP: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/cmrep/");
 
 // ---------------------------------------------------------------------------------------------
 // Builders
@@ -350,11 +350,11 @@ fn subdivided_y_inflates_and_keeps_its_seam() {
 // ---------------------------------------------------------------------------------------------
 // (3) The placenta sheet against cmrep's inflation
 
-fn read_vtk(name: &str) -> medial_io::vtk::PolyData {
-    medial_io::vtk::read_polydata(Path::new(&format!("{CMREP}{name}"))).expect("read cmrep data")
+fn read_vtk(name: &str) -> medial::io::vtk::PolyData {
+    medial::io::vtk::read_polydata(Path::new(&format!("{CMREP}{name}"))).expect("read cmrep data")
 }
 
-fn point_array(data: &medial_io::vtk::PolyData, name: &str) -> Vec<f64> {
+fn point_array(data: &medial::io::vtk::PolyData, name: &str) -> Vec<f64> {
     data.point_data
         .iter()
         .find(|a| a.name == name)
@@ -719,11 +719,8 @@ fn inflated_templates_are_accepted_by_medial_template() {
             medial_points,
         } = inflate(&sheet).unwrap();
         let nb = boundary.points().len();
-        let template = medial_core::model::template::MedialTemplate::new(
-            boundary,
-            medial_index,
-            medial_points,
-        );
+        let template =
+            medial::model::template::MedialTemplate::new(boundary, medial_index, medial_points);
         assert!(
             template.is_ok(),
             "{nb} boundary points: {:?}",

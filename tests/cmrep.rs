@@ -2,23 +2,23 @@
 //! every encoding and layout, and the refusal of broken files with messages that say what and
 //! where.
 
-use medial_core::model::constraints::MedialConstraints;
-use medial_core::model::metrics::SpokeMetrics;
-use medial_core::Vec3;
-use medial_io::cmrep::{
+use medial::io::cmrep::{
     read_template, template_from_polydata, template_to_polydata, write_template,
 };
-use medial_io::vtk::{read_polydata, Encoding, Layout, PolyData, WriteOptions};
-use medial_io::Error;
+use medial::io::vtk::{read_polydata, Encoding, Layout, PolyData, WriteOptions};
+use medial::io::Error;
+use medial::model::constraints::MedialConstraints;
+use medial::model::metrics::SpokeMetrics;
+use medial::Vec3;
 use std::path::Path;
 
 const T001: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/data/cmrep/t001_template_bcmrep.vtk"
+    "/../shared/data/cmrep/t001_template_bcmrep.vtk"
 );
 const PLACENTA: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/data/cmrep/placenta_template_anterioralign3_bcmrep.vtk"
+    "/../shared/data/cmrep/placenta_template_anterioralign3_bcmrep.vtk"
 );
 
 fn t001_data() -> PolyData {
@@ -178,6 +178,13 @@ fn broken_medial_indices_are_refused() {
     let m = refusal(&beyond, false);
     assert!(
         m.contains("skips atom") && m.contains("500 (at boundary point 5)"),
+        "{m}"
+    );
+    // An atom number far beyond the points used to size a table by it (an allocation abort).
+    set_point_value(&mut beyond, "MedialIndex", 5, 1e15);
+    let m = refusal(&beyond, false);
+    assert!(
+        m.contains("skips atom") && m.contains("1000000000000000"),
         "{m}"
     );
 

@@ -1,12 +1,12 @@
 //! The exact adjoint gradient of the objective against central finite differences and an
 //! independent dense implementation; determinism across thread counts and kernel caching.
 
-use medial_core::attachment::ssd::Ssd;
-use medial_core::attachment::Attachment;
-use medial_core::fit::objective::{ConstraintSet, Objective, Penalty};
-use medial_core::flow::{Flow, FlowParams};
-use medial_core::testing::dense;
-use medial_core::Vec3;
+use medial::attachment::ssd::Ssd;
+use medial::attachment::Attachment;
+use medial::fit::objective::{ConstraintSet, Objective, Penalty};
+use medial::flow::{Flow, FlowParams};
+use medial::testing::dense;
+use medial::Vec3;
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

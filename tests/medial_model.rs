@@ -2,10 +2,10 @@
 //! constraint values against direct formulas, Jacobian and weighted gradient against central
 //! finite differences, and invariance under similarity transforms.
 
-use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
-use medial_core::model::metrics::SpokeMetrics;
-use medial_core::model::template::MedialTemplate;
-use medial_core::{TriMesh, Vec3};
+use medial::model::constraints::{ConstraintUnits, MedialConstraints};
+use medial::model::metrics::SpokeMetrics;
+use medial::model::template::MedialTemplate;
+use medial::{TriMesh, Vec3};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -13,11 +13,11 @@ use std::path::Path;
 
 const T001: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../../shared/data/cmrep/t001_template_bcmrep.vtk"
+    "/../shared/data/cmrep/t001_template_bcmrep.vtk"
 );
 
 fn t001() -> MedialTemplate {
-    medial_io::cmrep::read_template(Path::new(T001)).expect("t001 is a valid template")
+    medial::io::cmrep::read_template(Path::new(T001)).expect("t001 is a valid template")
 }
 
 /// The template's landmarks moved by independent uniform offsets in `[−amplitude, amplitude]`.
@@ -118,7 +118,7 @@ fn t001_reference_metrics() {
         assert!((m.thickness[atom] - 2.0 * mean).abs() < 1e-12);
     }
     // The Loop normals point outward: within 0.07° of the file's unit outward normals.
-    let data = medial_io::vtk::read_polydata(Path::new(T001)).expect("reads");
+    let data = medial::io::vtk::read_polydata(Path::new(T001)).expect("reads");
     let file = data.point_array_ci("normals").expect("t001 has normals");
     for (b, n) in t.tangents().normals(t.landmarks()).iter().enumerate() {
         let f = Vec3::from_column_slice(&file.values[3 * b..3 * b + 3]);

@@ -1,11 +1,11 @@
 //! The whole augmented-Lagrangian objective with the medial constraints of a real template
 //! (cmrep's t001, k = 503, L = 753): its exact gradient against central finite differences.
 
-use medial_core::attachment::ssd::Ssd;
-use medial_core::fit::objective::{Objective, Penalty};
-use medial_core::flow::{Flow, FlowParams};
-use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
-use medial_core::Vec3;
+use medial::attachment::ssd::Ssd;
+use medial::fit::objective::{Objective, Penalty};
+use medial::flow::{Flow, FlowParams};
+use medial::model::constraints::{ConstraintUnits, MedialConstraints};
+use medial::Vec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::Path;
@@ -21,9 +21,9 @@ fn al_objective_gradient_in_relative_units_matches_central_differences_on_t001()
 }
 
 fn check(units: ConstraintUnits) {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data/cmrep/t001_template_bcmrep.vtk");
-    let template = medial_io::cmrep::read_template(&path).unwrap();
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/cmrep/t001_template_bcmrep.vtk");
+    let template = medial::io::cmrep::read_template(&path).unwrap();
     let constraints = MedialConstraints::with_units(&template, units).unwrap();
     assert_eq!(constraints.len(), 753);
     let q0 = template.landmarks();

@@ -5,11 +5,17 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use flate2::write::GzEncoder;
-use medial_core::image::volume::Volume;
-use medial_core::Vec3;
-use medial_io::exr_volume::{read_exr_volume, write_exr_volume, AFFINE_ATTRIBUTE, DIMS_ATTRIBUTE};
-use medial_io::nifti_volume::{read_nifti, write_nifti, NiftiType};
-use medial_io::Error;
+use medial::image::volume::Volume;
+use medial::io::error::Geometry;
+use medial::io::exr_volume::{read_exr_volume, write_exr_volume, AFFINE_ATTRIBUTE, DIMS_ATTRIBUTE};
+use medial::io::nifti_volume::{read_nifti, write_nifti, NiftiType};
+use medial::io::volume::read_volume;
+use medial::io::Error;
+use medial::Vec3;
+
+#[path = "common/clean.rs"]
+mod clean;
+use clean::assert_clean;
 use nalgebra::{Matrix3, Matrix4, Rotation3, Unit, Vector4};
 
 /// An oblique grid: rotation × anisotropic spacing, with an offset.
@@ -23,6 +29,8 @@ fn oblique(left_handed: bool) -> Matrix4<f64> {
         .copy_from(&Vec3::new(-91.5, 12.25, 40.0));
     m
 }
+
+const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/examples");
 
 fn volume(values: impl Fn(usize) -> f64, affine: Matrix4<f64>) -> Volume {
     let dims = [5, 4, 3];
@@ -120,6 +128,7 @@ struct Header {
     sform_code: i16,
     quatern: [f32; 6],
     srow: [[f32; 4]; 3],
+    vox_offset: f32,
 }
 
 impl Header {
@@ -134,10 +143,12 @@ impl Header {
             sform_code: 0,
             quatern: [0.0; 6],
             srow: [[0.0; 4]; 3],
+            vox_offset: 352.0,
         }
     }
 
-    /// The 348-byte header, the 4-byte empty extension and `data`, at the NIfTI-1 offsets.
+    /// The 348-byte header, the 4-byte empty extension and `data`, at the NIfTI-1 offsets
+    /// (`data` follows the extension, whatever `vox_offset` says).
     fn file(&self, data: &[u8]) -> Vec<u8> {
         let mut b = vec![0u8; 352];
         let put = |b: &mut Vec<u8>, at: usize, bytes: &[u8]| {
@@ -152,7 +163,7 @@ impl Header {
         for (n, p) in self.pixdim.iter().enumerate() {
             put(&mut b, 76 + 4 * n, &p.to_le_bytes());
         }
-        put(&mut b, 108, &352f32.to_le_bytes());
+        put(&mut b, 108, &self.vox_offset.to_le_bytes());
         put(&mut b, 112, &self.scl.0.to_le_bytes());
         put(&mut b, 116, &self.scl.1.to_le_bytes());
         put(&mut b, 123, &[2]); // xyzt_units: mm
@@ -243,7 +254,7 @@ fn qform_only_header_gives_the_quaternion_map() {
 fn sform_wins_over_qform_and_spacing_is_the_fallback() {
     let dir = tempfile::tempdir().unwrap();
     let mut h = Header::new([2, 2, 2]);
-    h.pixdim[..4].copy_from_slice(&[1.0, 0.5, 0.0, 2.0]); // pixdim[2] = 0 is taken as 1
+    h.pixdim[..4].copy_from_slice(&[1.0, 0.5, 1.0, 2.0]);
     let v = read_nifti(&h.write(dir.path(), "plain.nii", &[0u8; 8])).unwrap();
     assert!((world(&v, 1.0, 1.0, 1.0) - Vec3::new(0.5, 1.0, 2.0)).norm() < 1e-12);
     h.qform_code = 1;
@@ -289,7 +300,13 @@ fn datatypes_scaling_and_four_dimensions() {
     h.dim = [4, 2, 1, 1, 2, 1, 1, 1];
     let err = read_nifti(&h.write(dir.path(), "t2.nii", &[0; 4])).unwrap_err();
     assert!(
-        matches!(err, Error::Format { .. }) && err.to_string().contains("dimension 4 has size 2"),
+        matches!(
+            err,
+            Error::Geometry {
+                problem: Geometry::ExtraDimension { axis: 4, size: 2 },
+                ..
+            }
+        ) && err.to_string().contains("dimension 4 has size 2"),
         "{err}"
     );
     // Complex voxels: refused.
@@ -311,7 +328,13 @@ fn degenerate_or_invalid_content_is_refused() {
     ];
     let err = read_nifti(&h.write(dir.path(), "flat.nii", &[0; 8])).unwrap_err();
     assert!(
-        matches!(err, Error::Model { .. }) && err.to_string().contains("zero column 1"),
+        matches!(
+            err,
+            Error::Geometry {
+                problem: Geometry::VoxelSize { axis: 2, .. },
+                ..
+            }
+        ),
         "{err}"
     );
     let mut h = Header::new([1, 1, 1]);
@@ -399,4 +422,285 @@ fn exr_without_attributes_is_one_slice() {
     assert_eq!(v.dims(), [3, 2, 1]);
     assert_eq!(v.data(), &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
     assert_eq!(v.voxel_to_world(), &Matrix4::identity());
+}
+
+#[test]
+fn read_volume_chooses_the_format_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let original = volume(|n| n as f64, oblique(false));
+    for name in ["v.nii", "v.nii.gz"] {
+        let path = dir.path().join(name);
+        write_nifti(&path, &original, NiftiType::U8).unwrap();
+        let gzip = std::fs::read(&path).unwrap().starts_with(&[0x1f, 0x8b]);
+        assert_eq!(gzip, name.ends_with(".gz"), "{name}");
+        let back = read_volume(&path).unwrap();
+        assert_eq!(back.data(), original.data(), "{name}");
+        let upper = dir.path().join(format!("upper-{}", name.to_uppercase()));
+        std::fs::copy(&path, &upper).unwrap();
+        assert_eq!(
+            read_volume(&upper).unwrap().data(),
+            original.data(),
+            "{name}"
+        );
+    }
+    let path = dir.path().join("v.exr");
+    write_exr_volume(&path, &original).unwrap();
+    assert_eq!(read_volume(&path).unwrap().data(), original.data());
+    let err = read_volume(&dir.path().join("v.img")).unwrap_err();
+    assert!(matches!(err, Error::Format { .. }), "{err:?}");
+    assert!(
+        err.to_string()
+            .ends_with("v.img: unknown image format: expected .nii, .nii.gz or .exr"),
+        "{err}"
+    );
+}
+
+/// The shipped targets hold the same map as sform and as qform (quaternion): read with the
+/// sform disabled, the quaternion gives the sform's map to the precision of the f32 fields.
+#[test]
+fn shipped_targets_read_the_same_from_qform_and_sform() {
+    let dir = tempfile::tempdir().unwrap();
+    for case in ["toy", "cup", "t001-bent"] {
+        let path = Path::new(EXAMPLES).join(case).join("target.nii.gz");
+        let from_sform = read_nifti(&path).unwrap();
+        let mut bytes = Vec::new();
+        std::io::Read::read_to_end(
+            &mut flate2::read::GzDecoder::new(std::fs::File::open(&path).unwrap()),
+            &mut bytes,
+        )
+        .unwrap();
+        assert_eq!(
+            i16::from_le_bytes([bytes[252], bytes[253]]),
+            1,
+            "{case}: qform_code"
+        );
+        bytes[254..256].copy_from_slice(&0i16.to_le_bytes());
+        let copy = dir.path().join(format!("{case}.nii"));
+        std::fs::write(&copy, &bytes).unwrap();
+        let from_qform = read_nifti(&copy).unwrap();
+        assert_eq!(from_qform.data(), from_sform.data());
+        let scale = from_sform.voxel_to_world().abs().max();
+        assert_affine_close(
+            from_qform.voxel_to_world(),
+            from_sform.voxel_to_world(),
+            1e-6 * scale,
+        );
+    }
+}
+
+/// A quaternion with `b² + c² + d² = 1` is a 180° rotation (`a = 0`).
+#[test]
+fn half_turn_quaternion() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut h = Header::new([2, 2, 2]);
+    h.qform_code = 1;
+    h.quatern = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let v = read_nifti(&h.write(dir.path(), "half.nii", &[0u8; 8])).unwrap();
+    let expected = Matrix4::from_diagonal(&Vector4::new(1.0, -1.0, -1.0, 1.0));
+    assert_affine_close(v.voxel_to_world(), &expected, 1e-15);
+}
+
+/// The geometry problem of reading `h` with 8 voxels of data, checked to be a clean error.
+fn geometry_problem(dir: &Path, name: &str, h: &Header) -> Geometry {
+    let path = h.write(dir, name, &[0u8; 8]);
+    match read_nifti(&path) {
+        Err(error @ Error::Geometry { .. }) => {
+            assert_clean(&error, &path);
+            let Error::Geometry { problem, .. } = error else {
+                unreachable!()
+            };
+            problem
+        }
+        other => panic!("{name}: expected a geometry error, got {other:?}"),
+    }
+}
+
+/// A 2×2×2 header with the sform `diag(x, y, z)`.
+fn diagonal_sform(x: f32, y: f32, z: f32) -> Header {
+    let mut h = Header::new([2, 2, 2]);
+    h.sform_code = 1;
+    h.srow = [[x, 0.0, 0.0, 0.0], [0.0, y, 0.0, 0.0], [0.0, 0.0, z, 0.0]];
+    h
+}
+
+/// A `vox_offset` beyond the end of the file was ignored (the data were read after the
+/// header); the data now start at `vox_offset`, which must lie in the file.
+#[test]
+fn vox_offset_places_the_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut h = Header::new([2, 1, 1]);
+    h.vox_offset = 356.0;
+    let v = read_nifti(&h.write(dir.path(), "padded.nii", &[9, 9, 9, 9, 1, 2])).unwrap();
+    assert_eq!(v.data(), &[1.0, 2.0], "the data start at vox_offset");
+    for offset in [1000.0, -16.0, f32::NAN] {
+        h.vox_offset = offset;
+        let path = h.write(dir.path(), "offset.nii", &[1, 2]);
+        let err = read_nifti(&path).unwrap_err();
+        assert_clean(&err, &path);
+        assert!(
+            matches!(
+                err,
+                Error::DataOffset {
+                    field: "vox_offset",
+                    file_len: 354,
+                    ..
+                }
+            ),
+            "{offset}: {err:?}"
+        );
+    }
+    h.vox_offset = 352.0;
+    let path = h.write(dir.path(), "short.nii", &[1]);
+    let err = read_nifti(&path).unwrap_err();
+    assert_clean(&err, &path);
+    assert!(
+        matches!(
+            err,
+            Error::Truncated {
+                needed: 2,
+                available: 1,
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    let path = dir.path().join("header.nii");
+    std::fs::write(&path, &h.file(&[])[..200]).unwrap();
+    let err = read_nifti(&path).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            Error::Truncated {
+                needed: 348,
+                available: 200,
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+}
+
+/// Spacings and voxel-to-world maps that can only give garbage world coordinates.
+#[test]
+fn garbage_geometry_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // pixdim 0 with no qform or sform (it used to be taken as 1 mm).
+    let mut h = Header::new([2, 2, 2]);
+    h.pixdim[2] = 0.0;
+    let problem = geometry_problem(d, "zero.nii", &h);
+    assert_eq!(
+        problem,
+        Geometry::Spacing {
+            axis: 2,
+            value: 0.0
+        }
+    );
+    // Negative or non-finite pixdim, with no xform or with a qform.
+    h.pixdim[2] = 1.0;
+    h.pixdim[1] = -0.5;
+    let problem = geometry_problem(d, "negative.nii", &h);
+    assert_eq!(
+        problem,
+        Geometry::Spacing {
+            axis: 1,
+            value: -0.5
+        }
+    );
+    h.pixdim[1] = 1.0;
+    h.pixdim[3] = f32::INFINITY;
+    h.qform_code = 1;
+    let problem = geometry_problem(d, "infinite.nii", &h);
+    assert_eq!(
+        problem,
+        Geometry::Spacing {
+            axis: 3,
+            value: f32::INFINITY
+        }
+    );
+    // The sform wins: the spacings are not used.
+    h.sform_code = 1;
+    h.srow = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0],
+    ];
+    assert!(read_nifti(&h.write(d, "sform.nii", &[0u8; 8])).is_ok());
+    // Absurd voxel sizes.
+    for (name, h, axis) in [
+        ("tiny.nii", diagonal_sform(1e-39, 1.0, 1.0), 1),
+        ("negative-tiny.nii", diagonal_sform(1.0, -1e-8, 1.0), 2),
+        ("huge.nii", diagonal_sform(1.0, 1.0, 2e4), 3),
+    ] {
+        match geometry_problem(d, name, &h) {
+            Geometry::VoxelSize { axis: a, .. } => assert_eq!(a, axis, "{name}"),
+            other => panic!("{name}: {other:?}"),
+        }
+    }
+    // Coplanar voxel axes, and a NaN entry.
+    let mut h = diagonal_sform(1.0, 1.0, 1.0);
+    h.srow[0][1] = 1.0;
+    h.srow[1][1] = 0.0;
+    assert!(matches!(
+        geometry_problem(d, "singular.nii", &h),
+        Geometry::Singular { sine } if sine < 1e-6
+    ));
+    let mut h = diagonal_sform(1.0, 1.0, 1.0);
+    h.srow[2][3] = f32::NAN;
+    assert!(matches!(
+        geometry_problem(d, "nan.nii", &h),
+        Geometry::NonFiniteMap {
+            row: 3,
+            column: 4,
+            ..
+        }
+    ));
+    // The same grid check applies to OpenEXR volumes.
+    let mut tiny = Matrix4::identity();
+    tiny[(0, 0)] = 1e-39;
+    let path = d.join("tiny.exr");
+    write_exr_volume(&path, &Volume::new([1, 1, 1], vec![0.0], tiny).unwrap()).unwrap();
+    let err = read_exr_volume(&path).unwrap_err();
+    assert_clean(&err, &path);
+    assert!(
+        matches!(
+            err,
+            Error::Geometry {
+                problem: Geometry::VoxelSize { axis: 1, .. },
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+}
+
+/// Images that are not 3-D, or have an empty dimension, are refused; 1×1×1 is a legal file.
+#[test]
+fn images_that_are_not_volumes_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut h = Header::new([2, 2, 2]);
+    h.dim = [2, 4, 2, 1, 1, 1, 1, 1];
+    assert_eq!(
+        geometry_problem(d, "2d.nii", &h),
+        Geometry::TooFewDimensions { ndim: 2 }
+    );
+    h.dim = [4, 2, 2, 1, 2, 1, 1, 1];
+    assert_eq!(
+        geometry_problem(d, "4d.nii", &h),
+        Geometry::ExtraDimension { axis: 4, size: 2 }
+    );
+    h.dim = [3, 8, 0, 1, 1, 1, 1, 1];
+    assert_eq!(
+        geometry_problem(d, "empty.nii", &h),
+        Geometry::EmptyDimension { axis: 2, size: 0 }
+    );
+    h.dim = [3, -8, 1, 1, 1, 1, 1, 1];
+    assert_eq!(
+        geometry_problem(d, "negative.nii", &h),
+        Geometry::EmptyDimension { axis: 1, size: -8 }
+    );
+    let one = Header::new([1, 1, 1]);
+    let v = read_nifti(&one.write(d, "one.nii", &[7])).unwrap();
+    assert_eq!((v.dims(), v.data()), ([1, 1, 1], &[7.0][..]));
 }

@@ -2,11 +2,18 @@
 
 use std::path::{Path, PathBuf};
 
-use medial_core::{TriMesh, Vec3};
-use medial_io::mesh::{read_mesh, write_mesh};
-use medial_io::Error;
+use medial::io::mesh::{read_mesh, read_points, write_mesh};
+use medial::io::Error;
+use medial::{TriMesh, Vec3};
 
-const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data");
+#[path = "common/clean.rs"]
+mod clean;
+#[path = "common/glb.rs"]
+mod glb;
+use clean::assert_clean;
+use glb::{glb, gltf_json, tetra_buffer, tetra_glb, TETRA, TETRA_INDICES};
+
+const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data");
 
 fn write_file(dir: &tempfile::TempDir, name: &str, bytes: &[u8]) -> PathBuf {
     let path = dir.path().join(name);
@@ -14,7 +21,7 @@ fn write_file(dir: &tempfile::TempDir, name: &str, bytes: &[u8]) -> PathBuf {
     path
 }
 
-fn format_message(result: medial_io::Result<TriMesh>) -> String {
+fn format_message(result: medial::io::Result<TriMesh>) -> String {
     match result {
         Err(Error::Format { message, .. }) => message,
         other => panic!("expected a format error, got {other:?}"),
@@ -154,53 +161,6 @@ fn base64(bytes: &[u8]) -> String {
     out
 }
 
-const TETRA: [[f32; 3]; 4] = [
-    [0.0, 0.0, 0.0],
-    [1.0, 0.0, 0.0],
-    [0.0, 1.0, 0.0],
-    [0.0, 0.0, 1.0],
-];
-const TETRA_INDICES: [u16; 12] = [0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3];
-
-/// Positions (48 bytes) then u16 indices (24 bytes).
-fn tetra_buffer() -> Vec<u8> {
-    let mut bytes: Vec<u8> = TETRA
-        .iter()
-        .flatten()
-        .flat_map(|v| v.to_le_bytes())
-        .collect();
-    bytes.extend(TETRA_INDICES.iter().flat_map(|i| i.to_le_bytes()));
-    bytes
-}
-
-/// A glTF document: node 0 = mesh translated by (10, 0, 0); node 1 = scale `scale`, with
-/// child node 2 = mesh translated by (0, 1, 0). `buffer` is the buffer object's JSON.
-fn gltf_json(buffer: &str, scale: [f32; 3], mode: u32) -> String {
-    format!(
-        r#"{{
-  "asset": {{"version": "2.0"}},
-  "scene": 0,
-  "scenes": [{{"nodes": [0, 1]}}],
-  "nodes": [
-    {{"mesh": 0, "translation": [10, 0, 0]}},
-    {{"children": [2], "scale": [{}, {}, {}]}},
-    {{"mesh": 0, "translation": [0, 1, 0]}}
-  ],
-  "meshes": [{{"name": "tetra", "primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1, "mode": {mode}}}]}}],
-  "buffers": [{buffer}],
-  "bufferViews": [
-    {{"buffer": 0, "byteOffset": 0, "byteLength": 48, "target": 34962}},
-    {{"buffer": 0, "byteOffset": 48, "byteLength": 24, "target": 34963}}
-  ],
-  "accessors": [
-    {{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 1]}},
-    {{"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"}}
-  ]
-}}"#,
-        scale[0], scale[1], scale[2]
-    )
-}
-
 fn embedded_gltf(scale: [f32; 3], mode: u32) -> String {
     let buffer = format!(
         r#"{{"byteLength": 72, "uri": "data:application/octet-stream;base64,{}"}}"#,
@@ -268,22 +228,7 @@ fn gltf_mirroring_keeps_orientation() {
 
 #[test]
 fn gltf_binary_container() {
-    let json = gltf_json(r#"{"byteLength": 72}"#, [1.0, 1.0, 1.0], 4);
-    let mut json = json.into_bytes();
-    while json.len() % 4 != 0 {
-        json.push(b' ');
-    }
-    let bin = tetra_buffer();
-    let total = 12 + 8 + json.len() + 8 + bin.len();
-    let mut glb = b"glTF".to_vec();
-    for word in [2u32, total as u32, json.len() as u32, 0x4E4F_534A] {
-        glb.extend_from_slice(&word.to_le_bytes());
-    }
-    glb.extend_from_slice(&json);
-    for word in [bin.len() as u32, 0x004E_4942] {
-        glb.extend_from_slice(&word.to_le_bytes());
-    }
-    glb.extend_from_slice(&bin);
+    let glb = tetra_glb();
     let dir = tempfile::tempdir().expect("temp dir");
     let mesh = read_mesh(&write_file(&dir, "t.GLB", &glb)).expect("read glb");
     assert_eq!(mesh.points(), expected_points([1.0, 1.0, 1.0]));
@@ -318,4 +263,180 @@ fn gltf_non_triangle_mode_is_refused() {
     );
     let message = format_message(read_mesh(&write_file(&dir, "bad.gltf", b"{not json")));
     assert!(message.contains("invalid glTF"), "{message}");
+}
+
+/// The points of any VTK polydata (whatever its cells), else of a mesh format.
+#[test]
+fn read_points_of_polydata_and_meshes() {
+    let dir = tempfile::tempdir().unwrap();
+    let quad = write_file(
+        &dir,
+        "quad.vtk",
+        b"# vtk DataFile Version 4.2\nquad\nASCII\nDATASET POLYDATA\nPOINTS 4 double\n\
+          0 0 0 1 0 0 1 1 0 0 1 0\nPOLYGONS 1 5\n4 0 1 2 3\n",
+    );
+    let points = read_points(&quad).unwrap();
+    assert_eq!(points.len(), 4);
+    assert_eq!(points[2], Vec3::new(1.0, 1.0, 0.0));
+    assert!(read_mesh(&quad).is_err(), "not a triangle mesh");
+    let obj = write_file(&dir, "tetra.OBJ", OBJ_TETRAHEDRON.as_bytes());
+    assert_eq!(
+        read_points(&obj).unwrap(),
+        read_mesh(&obj).unwrap().points()
+    );
+    let sphere = Path::new(DATA).join("cmrep/shooting_test_3d_sphere.vtk");
+    assert_eq!(
+        read_points(&sphere).unwrap(),
+        read_mesh(&sphere).unwrap().points()
+    );
+    let err = read_points(&dir.path().join("points.txt")).unwrap_err();
+    assert!(
+        err.to_string().contains("unknown mesh extension '.txt'"),
+        "{err}"
+    );
+}
+
+/// The error of reading the GLB of the tetrahedron document edited by `edit` (a JSON text
+/// replacement), checked to be clean.
+fn edited_glb_error(edit: (&str, &str)) -> Error {
+    let json = gltf_json(r#"{"byteLength": 72}"#, [1.0, 1.0, 1.0], 4);
+    assert!(json.contains(edit.0), "{}", edit.0);
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = write_file(
+        &dir,
+        "bad.glb",
+        &glb(&json.replace(edit.0, edit.1), &tetra_buffer()),
+    );
+    let error = read_mesh(&path).expect_err("a bad accessor");
+    assert_clean(&error, &path);
+    error
+}
+
+/// The accessor fields of an error, and its problem.
+fn accessor_problem(error: &Error) -> (&'static str, usize, &str) {
+    match error {
+        Error::Accessor {
+            role,
+            accessor,
+            problem,
+            ..
+        } => (*role, *accessor, problem),
+        other => panic!("expected an accessor error, got {other:?}"),
+    }
+}
+
+/// An `indices` accessor of floats made the gltf crate panic (`unreachable!`) in `read_mesh`.
+#[test]
+fn gltf_float_indices_are_refused() {
+    let error = edited_glb_error((r#""componentType": 5123"#, r#""componentType": 5126"#));
+    let (role, accessor, problem) = accessor_problem(&error);
+    assert_eq!((role, accessor), ("indices", 1));
+    assert!(
+        problem.contains("Scalar of F32") && problem.contains("Scalar of U16"),
+        "{problem}"
+    );
+    assert!(
+        error
+            .to_string()
+            .contains("mesh 0, primitive 0: indices accessor 1"),
+        "{error}"
+    );
+}
+
+/// Element types, counts, offsets and strides that the gltf crate would trust.
+#[test]
+fn gltf_accessors_outside_their_buffers_are_refused() {
+    let cases = [
+        // POSITION as 2 floats: read as 3 would run past each element.
+        (
+            (r#""type": "VEC3""#, r#""type": "VEC2""#),
+            "POSITION",
+            "Vec2 of F32",
+        ),
+        // An empty accessor.
+        ((r#""count": 4"#, r#""count": 0"#), "POSITION", "count is 0"),
+        // More elements than the view holds.
+        (
+            (r#""count": 12"#, r#""count": 13"#),
+            "indices",
+            "13 elements of 2 bytes",
+        ),
+        // A view beyond the buffer.
+        (
+            (r#""byteLength": 24"#, r#""byteLength": 40"#),
+            "indices",
+            "outside buffer 0",
+        ),
+        // A stride below the element size.
+        (
+            (
+                r#""byteLength": 48, "#,
+                r#""byteLength": 48, "byteStride": 8, "#,
+            ),
+            "POSITION",
+            "byteStride 8",
+        ),
+    ];
+    for (edit, expected_role, needle) in cases {
+        let error = edited_glb_error(edit);
+        let (role, _, problem) = accessor_problem(&error);
+        assert_eq!(role, expected_role, "{error}");
+        assert!(problem.contains(needle), "{needle}: {problem}");
+    }
+}
+
+/// Sparse positions are read; sparse indices that do not increase are refused.
+#[test]
+fn gltf_sparse_accessors() {
+    let sparse = |count: usize| {
+        format!(
+            r#""count": 4, "sparse": {{"count": {count}, "indices": {{"bufferView": 1, "componentType": 5123}}, "values": {{"bufferView": 0}}}}"#
+        )
+    };
+    let json = gltf_json(r#"{"byteLength": 72}"#, [1.0, 1.0, 1.0], 4);
+    let dir = tempfile::tempdir().expect("temp dir");
+    // Indices 0, 2: vertex 0 := TETRA[0], vertex 2 := TETRA[1].
+    let path = write_file(
+        &dir,
+        "sparse.glb",
+        &glb(&json.replace(r#""count": 4"#, &sparse(2)), &tetra_buffer()),
+    );
+    let mesh = read_mesh(&path).expect("sparse positions");
+    assert_eq!(mesh.points()[2], Vec3::new(11.0, 0.0, 0.0));
+    // Indices 0, 2, 1: not increasing.
+    let error = edited_glb_error((r#""count": 4"#, &sparse(3)));
+    let (_, _, problem) = accessor_problem(&error);
+    assert!(problem.contains("sparse index 2 is 1"), "{problem}");
+}
+
+/// A node reached twice (two parents, or a cycle) would be instanced again and again.
+#[test]
+fn gltf_node_graphs_that_are_not_trees_are_refused() {
+    let first = r#"{"mesh": 0, "translation": [10, 0, 0]}"#;
+    let second = r#"{"mesh": 0, "translation": [0, 1, 0]}"#;
+    for (edit, node) in [
+        // Node 2 gets a second parent, node 0.
+        (
+            (
+                first,
+                r#"{"mesh": 0, "translation": [10, 0, 0], "children": [2]}"#,
+            ),
+            2,
+        ),
+        // Node 2 becomes the parent of its own parent.
+        (
+            (
+                second,
+                r#"{"mesh": 0, "translation": [0, 1, 0], "children": [1]}"#,
+            ),
+            1,
+        ),
+    ] {
+        let error = edited_glb_error(edit);
+        let needle = format!("node {node} is reached twice");
+        assert!(
+            matches!(&error, Error::Format { message, .. } if message.contains(&needle)),
+            "{error}"
+        );
+    }
 }

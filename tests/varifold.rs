@@ -6,19 +6,19 @@
 
 use std::sync::OnceLock;
 
-use medial_core::attachment::varifold::{
+use medial::attachment::varifold::{
     default_width, Kind, Varifold, VarifoldParams, DEFAULT_NORMAL_WIDTH,
 };
-use medial_core::attachment::Attachment;
-use medial_core::testing::varifold_dense::{self, subdivided};
-use medial_core::{Error, MedialTemplate, TriMesh, Vec3};
+use medial::attachment::Attachment;
+use medial::testing::varifold_dense::{self, subdivided};
+use medial::{Error, MedialTemplate, TriMesh, Vec3};
 use nalgebra::{Rotation3, Unit};
 use proptest::prelude::*;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/");
+const DATA: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/");
 
 const KINDS: [Kind; 3] = [
     Kind::Varifold,
@@ -32,7 +32,7 @@ fn t001() -> &'static MedialTemplate {
     static T001: OnceLock<MedialTemplate> = OnceLock::new();
     T001.get_or_init(|| {
         let path = format!("{DATA}cmrep/t001_template_bcmrep.vtk");
-        medial_io::cmrep::read_template(path.as_ref()).expect("the t001 template")
+        medial::io::cmrep::read_template(path.as_ref()).expect("the t001 template")
     })
 }
 
@@ -42,7 +42,7 @@ fn hippos() -> &'static (TriMesh, TriMesh) {
     HIPPOS.get_or_init(|| {
         let read = |name: &str| {
             let path = format!("{DATA}keops/hippos_reduc_{name}.vtk");
-            medial_io::vtk::read_trimesh(path.as_ref()).expect("a hippocampus")
+            medial::io::vtk::read_trimesh(path.as_ref()).expect("a hippocampus")
         };
         (read("source"), read("target"))
     })
@@ -350,7 +350,7 @@ fn default_width_follows_the_rule() {
     )
     .unwrap();
     assert!((default_width(&doubled).unwrap() - 2.0 * width).abs() < 1e-12 * width);
-    let (points, triangles) = medial_core::testing::meshes::octahedron();
+    let (points, triangles) = medial::testing::meshes::octahedron();
     let octahedron = TriMesh::new(points, triangles).unwrap();
     assert!((default_width(&octahedron).unwrap() - 2.0 * 2f64.sqrt()).abs() < 1e-15);
 }

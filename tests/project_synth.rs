@@ -5,24 +5,24 @@
 use std::path::Path;
 use std::sync::OnceLock;
 
-use medial_core::build::inflate::{inflate, MedialSheet};
-use medial_core::build::project::{project, ProjectOptions};
-use medial_core::mesh::subdivide::midpoint_subdivide;
-use medial_core::model::metrics::SpokeMetrics;
-use medial_core::model::template::MedialTemplate;
-use medial_core::synth::{
+use medial::build::inflate::{inflate, MedialSheet};
+use medial::build::project::{project, ProjectOptions};
+use medial::mesh::subdivide::midpoint_subdivide;
+use medial::model::metrics::SpokeMetrics;
+use medial::model::template::MedialTemplate;
+use medial::synth::{
     boundary_mesh, target_boundary, target_image, target_surface, PrincipalAxes, Shape,
     SyntheticCase, Warp,
 };
-use medial_core::{Error, TriMesh, Vec3};
+use medial::{Error, TriMesh, Vec3};
 use nalgebra::{Matrix3, Matrix4, Rotation3, Unit};
 use proptest::prelude::*;
 
-const CMREP: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../../shared/data/cmrep/");
+const CMREP: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/cmrep/");
 
 fn placenta_template(subdivisions: usize) -> MedialTemplate {
     let path = format!("{CMREP}placenta_template_anterioralign3.vtk");
-    let data = medial_io::vtk::read_polydata(Path::new(&path)).expect("placenta sheet");
+    let data = medial::io::vtk::read_polydata(Path::new(&path)).expect("placenta sheet");
     let radius = data.point_array("Radius").expect("Radius").values.clone();
     let mut sheet = MedialSheet::new(data.points.clone(), data.triangles().unwrap(), radius)
         .expect("placenta sheet is valid");
@@ -46,7 +46,7 @@ fn spoke_histogram(t: &MedialTemplate) -> [usize; 3] {
 }
 
 fn volume(mesh: &TriMesh) -> f64 {
-    medial_core::mesh::topology::signed_volume(mesh.points(), mesh.triangles())
+    medial::mesh::topology::signed_volume(mesh.points(), mesh.triangles())
 }
 
 /// Centroid of the solid bounded by `mesh` (divergence theorem over tetrahedra to the origin).
@@ -119,7 +119,7 @@ fn placenta_inflated_once_projects_onto_the_constraints() {
 #[test]
 fn cmrep_template_is_already_medial_and_barely_moves() {
     let path = format!("{CMREP}t001_template_bcmrep.vtk");
-    let template = medial_io::cmrep::read_template(Path::new(&path)).expect("t001");
+    let template = medial::io::cmrep::read_template(Path::new(&path)).expect("t001");
     let p = project(&template, &ProjectOptions::default()).expect("projects");
     println!(
         "t001: before {:.3}°, {:.3} %; moves max {:.4} mm, {} iterations",
@@ -307,7 +307,7 @@ proptest! {
 /// layers, so it hardly depends on their number), the template itself much less.
 #[test]
 fn the_warped_template_matches_the_target_image() {
-    use medial_core::attachment::dice::{DiceAttachment, DiceParams};
+    use medial::attachment::dice::{DiceAttachment, DiceParams};
     for shape in Shape::ALL {
         let case = synthetic_case(shape);
         let t = case.template();
@@ -359,7 +359,7 @@ fn the_warped_template_matches_the_target_image() {
 
 fn t001() -> MedialTemplate {
     let path = format!("{CMREP}t001_template_bcmrep.vtk");
-    medial_io::cmrep::read_template(Path::new(&path)).expect("t001")
+    medial::io::cmrep::read_template(Path::new(&path)).expect("t001")
 }
 
 /// A warp with every part non-trivial: tilted frame, twist, bend, affine map.
