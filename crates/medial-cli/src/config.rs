@@ -311,8 +311,11 @@ impl Config {
             path: path.into(),
             message: e.to_string(),
         })?;
-        let base = path.parent().unwrap_or(Path::new("."));
-        config.resolve(base);
+        // Absolute, so that the resolved config a fit writes names the same files anywhere.
+        let folder = path.parent().filter(|p| !p.as_os_str().is_empty());
+        let base = std::path::absolute(folder.unwrap_or(Path::new(".")))
+            .map_err(|e| CliError::io(path, e))?;
+        config.resolve(&base);
         config.check().map_err(|message| CliError::Config {
             path: path.into(),
             message,

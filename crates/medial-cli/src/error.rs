@@ -23,6 +23,9 @@ pub enum CliError {
     /// The inputs do not fit together (sizes, stage names, missing arrays).
     #[error("{0}")]
     Input(String),
+    /// A command line that clap's rules cannot express is wrong. Exit code 2.
+    #[error("{0}")]
+    Usage(String),
     /// The fit ended at an unsound iterate (folded, diverged, not finite); the results of the
     /// last sound iterate were written, marked as such. Exit code 3.
     #[error("{0}")]
@@ -49,6 +52,7 @@ impl CliError {
         match self {
             CliError::Unsound(_) => 3,
             CliError::ConstraintsNotMet(_) => 4,
+            CliError::Usage(_) => 2,
             _ => 1,
         }
     }

@@ -8,6 +8,7 @@ mod commands;
 mod config;
 mod error;
 mod output;
+mod plan;
 mod progress;
 mod stage;
 mod summary;

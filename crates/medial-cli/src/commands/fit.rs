@@ -1,22 +1,186 @@
 //! `medial fit`: runs the stages of a config (the engine's [`run_stages`]) and writes the results.
 
-use crate::config::Config;
 use crate::config::StageConfig;
+use crate::config::{AttachmentKind, Config};
 use crate::error::CliError;
-use crate::output::{write_json, write_options};
+use crate::output::model_error;
+use crate::output::{write_json, write_options, write_text};
+use crate::plan::{Geometry, Target};
 use crate::progress::{Log, LogRow, Progress};
 use crate::stage::{self, flow_of};
 use crate::summary::{Figures, StageSummary, Status, Summary};
 use crate::time_points::{self, time_points};
 use medial_core::fit::{
-    run_stages, ConstraintSet, FitEvent, Guard, PlannedStage, Stage, StageOutcome,
+    align_similarity, run_stages, similarity_between, ConstraintSet, FitEvent, Guard, PlannedStage,
+    Stage, StageOutcome,
 };
 use medial_core::flow::{Flow, Trajectory};
+use medial_core::model::MedialTemplate;
 use medial_core::model::{MedialConstraints, Model};
+use medial_core::synth::{boundary_mesh, PrincipalAxes};
 use medial_io::model::{boundary_polydata, medial_polydata};
 use medial_io::vtk;
+use nalgebra::Matrix4;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// The inputs of `medial fit` given as flags: without a config they choose an automatic
+/// schedule ([`crate::plan::FitPlan::automatic`]); with one they replace its template and
+/// targets. Relative paths are relative to the working directory.
+#[derive(clap::Args, Debug)]
+pub struct Inputs {
+    /// The template: a cmrep medial template (legacy VTK with a MedialIndex point array; mm).
+    #[arg(long, value_name = "TEMPLATE.vtk")]
+    pub template: Option<PathBuf>,
+    /// A segmentation to fit by Dice (.nii, .nii.gz, .exr; world coordinates in mm).
+    #[arg(long, value_name = "SEG.nii.gz", conflicts_with_all = ["target", "surface"])]
+    pub image: Option<PathBuf>,
+    /// With --image: the foreground label [default: every voxel > 0].
+    #[arg(long, value_name = "L", requires = "image")]
+    pub label: Option<f64>,
+    /// Points in correspondence with the template's boundary points, fitted by SSD (.vtk,
+    /// .obj, .gltf, .glb; same count and order).
+    #[arg(long, value_name = "POINTS.vtk", conflicts_with = "surface")]
+    pub target: Option<PathBuf>,
+    /// A surface without correspondence (any vertex count and order), fitted by a varifold
+    /// distance (.vtk, .obj, .gltf, .glb).
+    #[arg(long, value_name = "MESH.vtk")]
+    pub surface: Option<PathBuf>,
+}
+
+impl Inputs {
+    /// The same inputs with absolute paths, so that the resolved config names them wherever it
+    /// is read from.
+    fn absolute(&self) -> Result<Self, CliError> {
+        let abs = |p: &Option<PathBuf>| {
+            p.as_deref()
+                .map(|p| std::path::absolute(p).map_err(|e| CliError::io(p, e)))
+                .transpose()
+        };
+        Ok(Self {
+            template: abs(&self.template)?,
+            image: abs(&self.image)?,
+            label: self.label,
+            target: abs(&self.target)?,
+            surface: abs(&self.surface)?,
+        })
+    }
+}
+
+/// The config of a fit: `config` with the flags of `inputs` in place of its template and
+/// targets, or without one the automatic schedule of `inputs`.
+pub fn resolve(config: Option<&Path>, inputs: &Inputs, out: &Path) -> Result<Config, CliError> {
+    if inputs.label.is_some() && inputs.image.is_none() {
+        return Err(CliError::Usage("--label needs --image".into()));
+    }
+    let inputs = &inputs.absolute()?;
+    let Some(path) = config else {
+        return automatic(inputs, out);
+    };
+    let mut config = Config::load(path)?;
+    if let Some(template) = &inputs.template {
+        config.model.template.clone_from(template);
+    }
+    for stage in &mut config.stages {
+        match stage.attachment {
+            AttachmentKind::Dice => {
+                if let Some(image) = &inputs.image {
+                    stage.image = Some(image.clone());
+                    stage.label = inputs.label.or(stage.label);
+                }
+            }
+            AttachmentKind::Ssd if stage.target.is_some() => {
+                if let Some(target) = &inputs.target {
+                    stage.target = Some(target.clone());
+                }
+            }
+            AttachmentKind::Varifold => {
+                if let Some(surface) = &inputs.surface {
+                    stage.surface = Some(surface.clone());
+                }
+            }
+            AttachmentKind::Ssd => {}
+        }
+    }
+    Ok(config)
+}
+
+/// The automatic schedule of `--template` against the one target of `inputs`. The template is
+/// first carried by an initial similarity (which keeps it medial): by moments and overlap onto
+/// an image, by least squares onto corresponding points, none for a surface;
+/// `out/aligned_template.vtk` is the template the fit starts from, `out/alignment.txt` the
+/// similarity.
+fn automatic(inputs: &Inputs, out: &Path) -> Result<Config, CliError> {
+    let template_path = inputs
+        .template
+        .as_ref()
+        .expect("clap requires --template without a config");
+    let template = medial_io::cmrep::read_template(template_path)?;
+    let boundary = boundary_mesh(&template).map_err(|e| model_error(template_path, e))?;
+    let axes = PrincipalAxes::of(boundary.points()).map_err(|e| model_error(template_path, e))?;
+    let plan = Geometry::of(&template, &boundary, &axes).plan();
+    let (similarity, target) = match (&inputs.image, &inputs.target, &inputs.surface) {
+        (Some(image), None, None) => {
+            let mask = medial_io::volume::read_volume(image)?.foreground(inputs.label);
+            let a = align_similarity(&boundary, &mask).map_err(|e| model_error(image, e))?;
+            tracing::info!(
+                "initial similarity: scale {:.4}, voxel Dice {:.3} → {:.3}",
+                a.scale,
+                a.voxel_dice_before,
+                a.voxel_dice
+            );
+            let target = Target::Image {
+                path: image.clone(),
+                label: inputs.label,
+                voxel_mm: mask.spacing().min(),
+            };
+            (a.matrix, target)
+        }
+        (None, Some(points), None) => {
+            let q = medial_io::mesh::read_points(points)?;
+            let similarity = similarity_between(boundary.points(), &q)
+                .map_err(|e| CliError::Input(format!("{}: {e}", points.display())))?;
+            tracing::info!("initial similarity: the least-squares similarity to the points");
+            (similarity, Target::Points(points.clone()))
+        }
+        (None, None, Some(surface)) => (Matrix4::identity(), Target::Surface(surface.clone())),
+        _ => {
+            return Err(CliError::Input(
+                "without a config, medial fit needs --template and one of --image, --target, \
+                 --surface"
+                    .into(),
+            ))
+        }
+    };
+    let aligned = write_aligned(&template, &similarity, out)?;
+    Ok(plan.automatic(aligned, &target))
+}
+
+/// Carries `template` by `similarity` (which keeps it medial) and writes it as
+/// `out/aligned_template.vtk`, the similarity as `out/alignment.txt`; returns the template's
+/// absolute path.
+fn write_aligned(
+    template: &MedialTemplate,
+    similarity: &Matrix4<f64>,
+    out: &Path,
+) -> Result<PathBuf, CliError> {
+    create_dir(out)?;
+    medial_io::affine::write_affine(&out.join("alignment.txt"), similarity)?;
+    let map = nalgebra::Affine3::from_matrix_unchecked(*similarity);
+    let moved: Vec<_> = template
+        .landmarks()
+        .iter()
+        .map(|p| map.transform_point(&(*p).into()).coords)
+        .collect();
+    let aligned =
+        std::path::absolute(out.join("aligned_template.vtk")).map_err(|e| CliError::io(out, e))?;
+    medial_io::cmrep::write_template(
+        &aligned,
+        &template.with_landmarks(&moved)?,
+        write_options(false),
+    )?;
+    Ok(aligned)
+}
 
 /// Options of `medial fit` beyond the config.
 pub struct FitOptions {
@@ -27,6 +191,11 @@ pub struct FitOptions {
     /// No progress display.
     pub quiet: bool,
 }
+
+/// The comment lines of the resolved `config.toml` a fit writes.
+const RESOLVED_HEADER: &str = "# The config of this fit as it ran, every setting written out \
+(paths absolute or as given).\n# `medial fit config.toml --out DIR` runs it again to the same \
+bits.\n";
 
 /// Runs `config` and writes everything into `options.out`. A fit that ends at an unsound
 /// iterate, or with its constraints above their tolerance, writes its results (marked in
@@ -62,6 +231,10 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         })
         .collect();
     create_dir(&options.out.join("flow"))?;
+    write_text(
+        &options.out.join("config.toml"),
+        &config.to_toml(RESOLVED_HEADER)?,
+    )?;
     let mut log = Log::create(&options.out.join("log.csv"))?;
     let mut progress = Progress::new(options.quiet);
     let start = Instant::now();

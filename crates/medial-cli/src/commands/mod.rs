@@ -13,20 +13,25 @@ use crate::config::Config;
 use crate::error::CliError;
 use crate::output::print_json;
 use clap::Subcommand;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// The commands of `medial`.
 #[derive(Subcommand)]
 pub enum Command {
-    /// Run the stages of a TOML config and write summary.json, log.csv, momenta.npy, the flow
-    /// of the model (flow/boundary_tNNN.vtk, flow/medial_tNNN.vtk), time_points.csv (medial
-    /// templates) and fitted_template.vtk.
+    /// Run the stages of a TOML config, or without one an automatic schedule for --template
+    /// and one of --image, --target, --surface; write config.toml (the resolved config),
+    /// summary.json, log.csv, momenta.npy, lambda.npy, the flow of the model
+    /// (flow/boundary_tNNN.vtk, flow/medial_tNNN.vtk), time_points.csv and fitted_template.vtk.
     Fit {
-        /// The config file (TOML); relative paths in it are relative to its folder.
-        config: PathBuf,
-        /// Output folder (created if needed) [default: "out" beside the config].
-        #[arg(long, value_name = "DIR")]
+        /// The config file (TOML); relative paths in it are relative to its folder. With it,
+        /// --template and the targets override the config's.
+        #[arg(value_name = "CONFIG.toml", required_unless_present = "template")]
+        config: Option<PathBuf>,
+        /// Output folder (created if needed) [default with a config: "out" beside it].
+        #[arg(long, value_name = "DIR", required_unless_present = "config")]
         out: Option<PathBuf>,
+        #[command(flatten)]
+        inputs: fit::Inputs,
     },
     /// Evaluate a stage's objective at given momenta without optimising; prints one JSON object.
     Eval {
@@ -65,14 +70,19 @@ pub enum Command {
 /// Runs `command` with `threads` worker threads in use.
 pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError> {
     match command {
-        Command::Fit { config, out } => {
-            let cfg = Config::load(&config)?;
-            let out = out.unwrap_or_else(|| {
-                config
-                    .parent()
-                    .unwrap_or(std::path::Path::new("."))
-                    .join("out")
-            });
+        Command::Fit {
+            config,
+            out,
+            inputs,
+        } => {
+            let out = out
+                .or_else(|| {
+                    config
+                        .as_ref()
+                        .map(|c| c.parent().unwrap_or(Path::new(".")).join("out"))
+                })
+                .expect("clap requires --out without a config");
+            let cfg = fit::resolve(config.as_deref(), &inputs, &out)?;
             let summary = fit::run(
                 &cfg,
                 &fit::FitOptions {

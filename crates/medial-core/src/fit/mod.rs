@@ -1,14 +1,17 @@
 //! Fitting: the objective of one stage and its exact gradient ([`objective`]), its minimisation
 //! with L-BFGS ([`optimize`]) with every iterate checked for soundness ([`guard`]), the
 //! augmented-Lagrangian schedule of a stage ([`augmented_lagrangian`]), and a whole fit of
-//! several stages in a row ([`stages`]).
+//! several stages in a row ([`stages`]); and an initial similarity alignment to an image
+//! ([`align`]).
 
+pub mod align;
 pub mod augmented_lagrangian;
 pub mod guard;
 pub mod objective;
 pub mod optimize;
 pub mod stages;
 
+pub use align::{align_similarity, similarity_between, Alignment};
 pub use augmented_lagrangian::{
     run_stage, AlSchedule, MuUpdate, Progress, Stage, StageOutcome, UnsoundStop,
 };

@@ -9,15 +9,16 @@
 //! rasterized warped shape, the affine part and two configs: `fit_boundary.toml` (constrained
 //! SSD to the warped points) and `fit.toml` (the paper's affine SSD → Dice schedule).
 
-use super::{CaseFiles, FitPlan, SynthArgs, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE};
+use super::{CaseFiles, SynthArgs};
 use crate::error::CliError;
 use crate::output::{model_error, print_json, TemplateSummary};
+use crate::plan::{Geometry, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE};
 use medial_core::mesh::topology::signed_volume;
-use medial_core::model::template::MedialTemplate;
+
 use medial_core::synth::{
     boundary_mesh, target_boundary, target_image, target_surface, PrincipalAxes, Warp,
 };
-use medial_core::{TriMesh, Vec3};
+use medial_core::Vec3;
 use nalgebra::{Matrix4, Rotation3, Unit};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -136,70 +137,6 @@ struct WarpFigures {
     affine_determinant: f64,
     /// Largest `κx` over the boundary (the bend folds the shape at 1).
     max_bend_fraction: f64,
-}
-
-/// Geometry of the template that sets the fit's kernel width.
-#[derive(Serialize)]
-struct Geometry {
-    /// Mean spoke length `|q_b − q_M[b]|` over the boundary points (half thickness), mm.
-    mean_spoke_mm: f64,
-    /// Mean length of the boundary mesh's edges, mm.
-    mean_edge_mm: f64,
-    /// Extent along the long principal axis, mm.
-    long_extent_mm: f64,
-    /// The configs' kernel width, mm: see [`Geometry::sigma`].
-    sigma_mm: f64,
-}
-
-impl Geometry {
-    fn of(template: &MedialTemplate, boundary: &TriMesh, axes: &PrincipalAxes) -> Self {
-        let q = template.landmarks();
-        let atoms = template.medial_index();
-        let mean_spoke_mm = mean(
-            (0..template.boundary_count())
-                .map(|b| (q[b] - q[template.atom_landmark(atoms[b])]).norm()),
-        );
-        let p = boundary.points();
-        let mean_edge_mm = mean(
-            boundary
-                .triangles()
-                .iter()
-                .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
-                .map(|(a, b)| (p[a] - p[b]).norm()),
-        );
-        let mut g = Self {
-            mean_spoke_mm,
-            mean_edge_mm,
-            long_extent_mm: axes.extent.z,
-            sigma_mm: 0.0,
-        };
-        g.sigma_mm = g.sigma();
-        g
-    }
-
-    /// `σ` = the mean spoke length (about the half thickness, as for the built-in shapes: small
-    /// against the wall, so that the flow can move medial and boundary points apart as the
-    /// constraints need), at least half the mean edge length (neighbouring landmarks move
-    /// together), at most an eighth of the long extent (the upper bound wins), mm.
-    fn sigma(&self) -> f64 {
-        self.mean_spoke_mm
-            .max(self.mean_edge_mm / 2.0)
-            .min(self.long_extent_mm / 8.0)
-    }
-
-    /// The fit settings: `σ` from the geometry, 20 time steps, kinetic weight 0.005; L-BFGS
-    /// iterations: 500 towards the affine part, 1000 per AL iteration of the boundary fit, 300
-    /// per AL iteration of the Dice stage.
-    fn plan(&self) -> FitPlan {
-        FitPlan {
-            sigma: self.sigma_mm,
-            time_steps: 20,
-            kinetic_weight: 0.005,
-            affine_iterations: 500,
-            boundary_iterations: 1000,
-            dice_iterations: 300,
-        }
-    }
 }
 
 /// Reads the template, builds the warp and the targets, writes `template.vtk`,
@@ -367,10 +304,6 @@ fn file_name(path: &Path) -> String {
         .unwrap_or(path.as_os_str())
         .to_string_lossy()
         .into_owned()
-}
-
-fn mean(values: impl Iterator<Item = f64>) -> f64 {
-    mean_max(values).0
 }
 
 /// Mean and maximum of `values` (0, 0 for none).

@@ -5,16 +5,13 @@
 //!
 //! The template is a built-in analytic shape (`medial synth cup|toy`, this module) or any cmrep
 //! template (`medial synth --from TEMPLATE.vtk`, [`from_template`]); [`CaseFiles`] (the files
-//! of a case) and [`FitPlan`] (its configs) serve both.
+//! of a case) and [`FitPlan`](crate::plan::FitPlan) (its configs) serve both.
 
 mod from_template;
 
-use crate::config::{
-    AttachmentKind, Config, ConstraintUnitsConfig, FlowConfig, ModelConfig, OutputConfig,
-    StageConfig,
-};
 use crate::error::CliError;
 use crate::output::{print_json, write_options, write_text, TemplateSummary};
+use crate::plan::{FitPlan, PAPER_SCHEDULE_NOTE};
 use medial_core::image::volume::Volume;
 use medial_core::model::template::MedialTemplate;
 use medial_core::synth::{Shape, SyntheticCase};
@@ -175,92 +172,3 @@ impl CaseFiles<'_> {
         Ok(())
     }
 }
-
-/// The fit settings of a case's configs.
-pub struct FitPlan {
-    /// Kernel width σ, mm.
-    pub sigma: f64,
-    /// Time steps N.
-    pub time_steps: usize,
-    /// Weight of the kinetic energy.
-    pub kinetic_weight: f64,
-    /// L-BFGS iterations of the SSD stage towards the affine part.
-    pub affine_iterations: usize,
-    /// L-BFGS iterations per AL iteration of the constrained SSD fit to the warped boundary.
-    pub boundary_iterations: usize,
-    /// L-BFGS iterations per AL iteration of the Dice stage.
-    pub dice_iterations: usize,
-}
-
-/// AL iterations of the constrained SSD fit to the warped boundary (μ = 20 … 20000, relative
-/// constraint units: on cmrep's t001 about the weight of μ = 1 … 1000 in mm²).
-const BOUNDARY_AL_ITERATIONS: usize = 4;
-
-/// AL iterations of the Dice stage (μ = 0.02, 0.2, …, 2000 in relative constraint units; on
-/// cmrep's t001 about the weight of the paper's μ = 0.001 … 100 in mm², one step further than
-/// the paper's 10). Measured on t001 bent by `medial synth --from`: 0.24° and 0.36 %, against 0.57° and
-/// 1.59 % with the same schedule in mm² and 2.6 % when stopping at μ = 10.
-const DICE_AL_ITERATIONS: usize = 6;
-
-impl FitPlan {
-    /// The paper's schedule (`fit.toml`): SSD towards the affine part `affine.txt` (μ = 20, one
-    /// AL iteration), then Dice against `target.nii.gz` with the constraints in relative units
-    /// and μ = 0.02, 0.2, …, 2000 ([`DICE_AL_ITERATIONS`]).
-    pub fn paper_schedule(&self) -> Config {
-        let mut affine = StageConfig::new("affine", AttachmentKind::Ssd);
-        affine.transform = Some("affine.txt".into());
-        affine.mu = 20.0;
-        affine.al_iterations = 1;
-        affine.max_iterations = self.affine_iterations;
-        let mut dice = StageConfig::new("dice", AttachmentKind::Dice);
-        dice.image = Some("target.nii.gz".into());
-        dice.constraint_units = ConstraintUnitsConfig::Relative;
-        dice.mu = 0.02;
-        dice.mu_factor = 10.0;
-        dice.al_iterations = DICE_AL_ITERATIONS;
-        dice.max_iterations = self.dice_iterations;
-        self.config(vec![affine, dice])
-    }
-
-    /// The constrained SSD fit to the warped boundary points (`fit_boundary.toml`): target
-    /// `target_boundary.vtk` (known correspondence), constraints in relative units, μ = 20, 200,
-    /// 2000, 20000 over [`BOUNDARY_AL_ITERATIONS`] AL iterations.
-    pub fn boundary_ssd(&self) -> Config {
-        let mut boundary = StageConfig::new("boundary", AttachmentKind::Ssd);
-        boundary.target = Some("target_boundary.vtk".into());
-        boundary.constraints = Some(true);
-        boundary.constraint_units = ConstraintUnitsConfig::Relative;
-        boundary.mu = 20.0;
-        boundary.mu_factor = 10.0;
-        boundary.al_iterations = BOUNDARY_AL_ITERATIONS;
-        boundary.max_iterations = self.boundary_iterations;
-        self.config(vec![boundary])
-    }
-
-    /// A config of `template.vtk` with this plan's flow (σ rounded to 0.01 mm) and `stages`.
-    fn config(&self, stages: Vec<StageConfig>) -> Config {
-        Config {
-            model: ModelConfig {
-                template: "template.vtk".into(),
-            },
-            flow: FlowConfig {
-                sigma: (self.sigma * 100.0).round() / 100.0,
-                time_steps: self.time_steps,
-                kinetic_weight: self.kinetic_weight,
-            },
-            output: OutputConfig::default(),
-            stages,
-        }
-    }
-}
-
-/// The comment line of `fit.toml` on its schedule.
-const PAPER_SCHEDULE_NOTE: &str = "# As in the paper: one SSD AL iteration (mu = 20) towards \
-the affine initialisation, then the\n# Dice attachment with mu rising tenfold per AL iteration. \
-The constraints are in relative units\n# (mu = 0.02 ... 2000: on cmrep's t001 about the \
-paper's 0.001 ... 100 in mm²).\n";
-
-/// The comment line of `fit_boundary.toml` on its schedule.
-const BOUNDARY_SSD_NOTE: &str = "# SSD fit of the template's boundary points to the warped \
-ones (known correspondence), with\n# the medial constraints on in relative units, mu = 20, 200, \
-2000, 20000.\n";

@@ -1,0 +1,101 @@
+//! `medial fit` without a config: settings chosen from the data, an initial similarity, the
+//! resolved config written beside the results and re-run to the same bits; on the shipped toy
+//! (a template and its segmentation).
+
+mod common;
+
+use common::{f, medial, run_fails, s, text};
+use serde_json::Value;
+use std::path::Path;
+
+fn read_summary(out: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+}
+
+#[test]
+fn an_automatic_fit_to_a_segmentation_is_medial_and_its_config_reruns_to_the_same_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let toy = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/toy");
+    let out = dir.path().join("auto");
+    let (template, image) = (toy.join("template.vtk"), toy.join("target.nii.gz"));
+    let args = [
+        "fit",
+        "--template",
+        s(&template),
+        "--image",
+        s(&image),
+        "--out",
+        s(&out),
+        "-q",
+    ];
+    let o = medial(&args);
+    let err = text(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("initial similarity"), "{err}");
+    for file in [
+        "config.toml",
+        "alignment.txt",
+        "aligned_template.vtk",
+        "lambda.npy",
+    ] {
+        assert!(out.join(file).exists(), "{file}");
+    }
+    let summary = read_summary(&out);
+    let last = &summary["final"];
+    println!("automatic toy fit: {summary:#}");
+    assert!(["converged", "budget"].contains(&summary["status"].as_str().unwrap()));
+    assert!(f(&last["voxel_dice"]) >= 0.97, "{last}");
+    assert!(f(&last["max_spoke_normal_deg"]) <= 0.5, "{last}");
+    assert!(f(&last["max_spoke_mismatch_pct"]) <= 0.5, "{last}");
+    // The resolved config names every setting and every file by an absolute path: run from
+    // anywhere, it gives the same momenta.
+    let again = dir.path().join("again");
+    let config = out.join("config.toml");
+    let o = medial(&["fit", s(&config), "--out", s(&again), "-q"]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(
+        std::fs::read(out.join("momenta.npy")).unwrap(),
+        std::fs::read(again.join("momenta.npy")).unwrap()
+    );
+}
+
+#[test]
+fn an_automatic_fit_needs_a_template_and_one_target() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x");
+    let toy = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/toy");
+    let template = toy.join("template.vtk");
+    let o = run_fails(
+        &["fit", "--template", s(&template), "--out", s(&out)],
+        &["--image", "--target", "--surface"],
+    );
+    assert_eq!(o.status.code(), Some(1));
+    // Two targets, or --label without an image, are wrong command lines.
+    let image = toy.join("target.nii.gz");
+    let points = toy.join("target_boundary.vtk");
+    let both = [
+        "fit",
+        "--template",
+        s(&template),
+        "--image",
+        s(&image),
+        "--target",
+        s(&points),
+        "--out",
+        s(&out),
+    ];
+    assert_eq!(medial(&both).status.code(), Some(2));
+    let label = [
+        "fit",
+        "--template",
+        s(&template),
+        "--label",
+        "1",
+        "--target",
+        s(&points),
+        "--out",
+        s(&out),
+    ];
+    assert_eq!(medial(&label).status.code(), Some(2));
+    assert!(!out.exists(), "failures write nothing");
+}
