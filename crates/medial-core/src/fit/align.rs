@@ -125,7 +125,7 @@ pub fn align_similarity(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> 
             .map(|p| linear * p + shift)
             .collect();
         let dice = voxel_dice(&TriMesh::new(moved, boundary.triangles().to_vec())?, mask)?;
-        if best.is_none_or(|(_, d)| dice > d) {
+        if best.map_or(true, |(_, d)| dice > d) {
             best = Some((matrix, dice));
         }
     }
