@@ -512,7 +512,10 @@ target = "s.vtk"
         let text = MINIMAL.replace("[model]", "[flow]\nsigam = 3.0\n[model]");
         let e = toml::from_str::<Config>(&text).unwrap_err();
         let m = toml_error(&text, &e);
-        assert!(m.starts_with("line 3, column 1: unknown field `sigam`"), "{m}");
+        assert!(
+            m.starts_with("line 3, column 1: unknown field `sigam`"),
+            "{m}"
+        );
         assert!(!m.contains('\n'), "{m}");
     }
 

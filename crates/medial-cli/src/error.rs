@@ -62,15 +62,16 @@ pub enum CliError {
         stage: String,
         /// The image file.
         image: PathBuf,
-        /// World bounding box of the image's foreground voxels, mm.
-        foreground: Bounds,
+        /// World bounding box of the image's foreground voxels, mm (boxed, as the next: a
+        /// small error type).
+        foreground: Box<Bounds>,
         /// World bounding box of the template's boundary points, mm.
-        template: Bounds,
+        template: Box<Bounds>,
     },
     /// An SSD stage's `transform` is singular or reflects (determinant of its linear part
     /// `≤ 0` or not finite): its targets would be the template flattened or turned inside out.
     #[error(
-        "stage '{stage}': transform {} has determinant {determinant:.6e}: it must be positive \
+        "stage '{stage}': transform {} has determinant {determinant}: it must be positive \
          (a singular matrix flattens the template, a negative one reflects it, turning it inside \
          out)",
         path.display()

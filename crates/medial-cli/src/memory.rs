@@ -114,7 +114,12 @@ impl Estimate {
     pub fn flow(config: &Config, landmarks: usize) -> Self {
         let n = config.flow.time_steps as f64;
         let stages = config.stages.len() as f64;
-        let memory = config.stages.iter().map(|s| s.lbfgs_memory).max().unwrap_or(0) as f64;
+        let memory = config
+            .stages
+            .iter()
+            .map(|s| s.lbfgs_memory)
+            .max()
+            .unwrap_or(0) as f64;
         let controls = n * landmarks as f64 * 3.0;
         let multipliers = n * CONSTRAINTS_PER_LANDMARK * landmarks as f64;
         Self {
@@ -149,7 +154,10 @@ impl Estimate {
     /// Rasterizing on a grid of `dims` voxels.
     pub fn grid(dims: [usize; 3]) -> Self {
         Self {
-            parts: vec![("voxels", 24.0 * dims.map(|n| n as f64).iter().product::<f64>())],
+            parts: vec![(
+                "voxels",
+                24.0 * dims.map(|n| n as f64).iter().product::<f64>(),
+            )],
         }
     }
 
@@ -225,8 +233,14 @@ mod tests {
         stage.layers = 2;
         // 100 triangles → 400 subdivided, 4 chunks; 1000 voxels.
         let dice = Estimate::dice(&stage, 100, 50, 1000);
-        assert_eq!(dice.total(), 400.0 * (232.0 + 32.0) + 48.0 * 50.0 * 4.0 + 32_000.0);
-        assert!(dice.to_string().contains("(Dice samples and prisms "), "{dice}");
+        assert_eq!(
+            dice.total(),
+            400.0 * (232.0 + 32.0) + 48.0 * 50.0 * 4.0 + 32_000.0
+        );
+        assert!(
+            dice.to_string().contains("(Dice samples and prisms "),
+            "{dice}"
+        );
         assert_eq!(grid.to_string(), "about 0.1 MiB");
     }
 }

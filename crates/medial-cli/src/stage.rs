@@ -18,8 +18,8 @@ use medial_core::fit::optimize::LbfgsOptions;
 use medial_core::flow::{Flow, FlowParams};
 use medial_core::image::rasterize::voxel_dice;
 use medial_core::image::volume::Volume;
-use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
 use medial_core::mesh::Bounds;
+use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
 use medial_core::model::Model;
 use medial_core::{TriMesh, Vec3};
 
@@ -272,8 +272,8 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), 
         return Err(CliError::NoOverlap {
             stage: stage.name.clone(),
             image: path.into(),
-            foreground: mask.support_bounds().expect("a foreground voxel"),
-            template: Bounds::of(template.boundary_points()).expect("a boundary point"),
+            foreground: Box::new(mask.support_bounds().expect("a foreground voxel")),
+            template: Box::new(Bounds::of(template.boundary_points()).expect("a boundary point")),
         });
     }
     Ok((attachment, mask))

@@ -335,11 +335,11 @@ impl<'a> Arrays<'a> {
 
     /// Refuses a coordinate beyond ±[`MAX_COORDINATE`]; `what` and the index name the point.
     fn check_coordinates(&self, points: &[Vec3], what: &str) -> Result<()> {
-        match points.iter().enumerate().find_map(|(i, p)| {
-            p.iter()
-                .find(|c| c.abs() > MAX_COORDINATE)
-                .map(|c| (i, *c))
-        }) {
+        match points
+            .iter()
+            .enumerate()
+            .find_map(|(i, p)| p.iter().find(|c| c.abs() > MAX_COORDINATE).map(|c| (i, *c)))
+        {
             Some((i, c)) => Err(self.error(format!(
                 "{what} {i} has the coordinate {c:e}, beyond ±{MAX_COORDINATE:e} (mm): volumes, \
                  spoke lengths and distances computed from it overflow or lose their precision"

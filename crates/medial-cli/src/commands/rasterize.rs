@@ -72,4 +72,3 @@ pub fn run(args: &RasterizeArgs) -> Result<(), CliError> {
         volume_mm3: inside as f64 * mask.voxel_volume(),
     })
 }
-

@@ -552,7 +552,7 @@ mod tests {
                 .support_bounds(),
             None
         );
-        data[1 + 4 * (2 + 3 * 1)] = 1.0;
+        data[1 + 4 * (2 + 3)] = 1.0; // voxel (1, 2, 1)
         data[2] = 0.5;
         let v = Volume::new([4, 3, 2], data, oblique()).unwrap();
         let b = v.support_bounds().unwrap();

@@ -9,9 +9,7 @@
 //! rasterized warped shape, the affine part and two configs: `fit_boundary.toml` (constrained
 //! SSD to the warped points) and `fit.toml` (the paper's affine SSD → Dice schedule).
 
-use super::{
-    target_image, CaseFiles, FitPlan, SynthArgs, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE,
-};
+use super::{target_image, CaseFiles, FitPlan, SynthArgs, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE};
 use crate::error::CliError;
 use crate::output::{model_error, print_json, TemplateSummary};
 use medial_core::mesh::topology::signed_volume;
