@@ -23,7 +23,7 @@
 //! * **a grid to rasterize** ([`Estimate::grid`]), `V` voxels: `24·V` (the `f64` volume, the
 //!   buffer its slices are collected in, the 8-bit copy written).
 
-use crate::config::{AttachmentKind, Config, StageConfig};
+use crate::config::{Config, StageConfig};
 use crate::error::CliError;
 use std::sync::OnceLock;
 
@@ -136,7 +136,6 @@ impl Estimate {
     /// A Dice `stage` over `triangles` boundary triangles and `landmarks` points, against an
     /// image of `voxels` voxels.
     pub fn dice(stage: &StageConfig, triangles: usize, landmarks: usize, voxels: usize) -> Self {
-        debug_assert_eq!(stage.attachment, AttachmentKind::Dice);
         let subdivided = triangles as f64 * 4f64.powf(stage.subdivision as f64);
         let chunks = (subdivided / DICE_CHUNK).ceil();
         Self {
@@ -199,6 +198,7 @@ impl std::fmt::Display for Estimate {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::AttachmentKind;
 
     #[test]
     fn mem_total_is_read_in_kib() {
@@ -226,6 +226,14 @@ mod tests {
 
     #[test]
     fn estimates_follow_the_formulas() {
+        let config: Config = toml::from_str(
+            "[model]\ntemplate = \"t.vtk\"\n[flow]\ntime_steps = 10\n[[stage]]\nname = \"a\"\n\
+             attachment = \"ssd\"\ntarget = \"s.vtk\"\nlbfgs_memory = 5\n",
+        )
+        .unwrap();
+        // N·k·3 = 3000 numbers in 2·5 + 20 + 1 vectors; N·3k = 3000 multipliers, 3 + 1 times.
+        let flow = Estimate::flow(&config, 100);
+        assert_eq!(flow.total(), 8.0 * 3000.0 * 31.0 + 8.0 * 3000.0 * 4.0);
         let grid = Estimate::grid([10, 20, 30]);
         assert_eq!(grid.total(), 24.0 * 6000.0);
         let mut stage = StageConfig::new("dice", AttachmentKind::Dice);

@@ -249,7 +249,7 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), 
     )
     .check(|| format!("stage '{}'", stage.name))?;
     let mask = volume.foreground(stage.label);
-    drop(volume);
+    drop(volume); // Not needed past its mask: freed before the smoothing copies.
     let image = mask.smoothed(stage.image_sigma)?;
     let medial_of: Vec<usize> = template
         .medial_index()

@@ -17,12 +17,12 @@ fn toy(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// A config of the toy template (or `template`) with `time_steps` and the `[[stage]]` text
-/// `stages`, written into `dir`.
-fn write_config(dir: &Path, template: &Path, time_steps: u64, stages: &str) -> PathBuf {
+/// A config of the toy template with `time_steps` and the `[[stage]]` text `stages`, written
+/// into `dir`.
+fn write_config(dir: &Path, time_steps: u64, stages: &str) -> PathBuf {
     let config = format!(
         "[model]\ntemplate = {:?}\n[flow]\nsigma = 2.0\ntime_steps = {time_steps}\n{stages}",
-        s(template)
+        s(&toy("template.vtk"))
     );
     let path = dir.join("fit.toml");
     std::fs::write(&path, config).unwrap();
@@ -67,12 +67,7 @@ fn edited_template(header: &str, value: &str) -> String {
 #[test]
 fn fit_of_too_many_time_steps_is_refused_before_allocating() {
     let dir = tempfile::tempdir().unwrap();
-    let config = write_config(
-        dir.path(),
-        &toy("template.vtk"),
-        99_999_999_999,
-        &ssd_stage(&toy("affine.txt")),
-    );
+    let config = write_config(dir.path(), 99_999_999_999, &ssd_stage(&toy("affine.txt")));
     let out = dir.path().join("out");
     one_line_error(
         &fit_args(&config, &out, &[]),
@@ -152,12 +147,7 @@ fn max_memory_sets_the_limit() {
         &["grid", "more than the memory limit of 0.1 MiB"],
     );
     // The toy's Dice stage: its flow (N = 20) fits in 8 MiB, its image and samples do not.
-    let config = write_config(
-        dir.path(),
-        &toy("template.vtk"),
-        20,
-        &dice_stage(&toy("target.nii.gz")),
-    );
+    let config = write_config(dir.path(), 20, &dice_stage(&toy("target.nii.gz")));
     one_line_error(
         &fit_args(&config, &out, &["--max-memory", "0.008"]),
         1,
@@ -195,7 +185,6 @@ fn dice_image_off_the_template_is_refused_with_both_boxes() {
     shifted_target(&far, Vector3::new(500.0, 0.0, 0.0));
     let config = write_config(
         dir.path(),
-        &toy("template.vtk"),
         20,
         &(ssd_stage(&toy("affine.txt")) + &dice_stage(&far)),
     );
@@ -222,7 +211,7 @@ fn dice_image_off_the_template_is_refused_with_both_boxes() {
     )
     .unwrap();
     write_nifti(&voxel, &one, NiftiType::U8).unwrap();
-    let config = write_config(dir.path(), &toy("template.vtk"), 20, &dice_stage(&voxel));
+    let config = write_config(dir.path(), 20, &dice_stage(&voxel));
     one_line_error(
         &fit_args(&config, &out, &[]),
         1,
@@ -234,12 +223,7 @@ fn dice_image_off_the_template_is_refused_with_both_boxes() {
 #[test]
 fn eval_refuses_a_penalty_weight_that_is_not_positive() {
     let dir = tempfile::tempdir().unwrap();
-    let config = write_config(
-        dir.path(),
-        &toy("template.vtk"),
-        2,
-        &ssd_stage(&toy("affine.txt")),
-    );
+    let config = write_config(dir.path(), 2, &ssd_stage(&toy("affine.txt")));
     let momenta = dir.path().join("u.npy");
     medial_io::npy::write_npy(&momenta, &[2, 311, 3], &vec![0.0; 2 * 311 * 3]).unwrap();
     let eval = |mu: &str| {
@@ -314,7 +298,7 @@ fn ssd_transform_must_keep_orientation() {
     ] {
         let transform = dir.path().join(name);
         std::fs::write(&transform, matrix).unwrap();
-        let config = write_config(dir.path(), &toy("template.vtk"), 20, &ssd_stage(&transform));
+        let config = write_config(dir.path(), 20, &ssd_stage(&transform));
         one_line_error(
             &fit_args(&config, &out, &[]),
             1,
@@ -352,7 +336,6 @@ fn config_errors_take_one_line() {
     let dir = tempfile::tempdir().unwrap();
     let config = write_config(
         dir.path(),
-        &toy("template.vtk"),
         20,
         "[[stage]]\nname = \"x\"\nattachment = \"ssd\"\ntargte = \"t.vtk\"\n",
     );
