@@ -62,8 +62,8 @@ pub enum CliError {
         stage: String,
         /// The image file.
         image: PathBuf,
-        /// World bounding box of the image's foreground voxels, mm (boxed, as the next: a
-        /// small error type).
+        /// World bounding box of the image's foreground voxels, mm (boxed, like `template`,
+        /// to keep the error type small).
         foreground: Box<Bounds>,
         /// World bounding box of the template's boundary points, mm.
         template: Box<Bounds>,

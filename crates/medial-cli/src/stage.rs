@@ -250,7 +250,9 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), 
     .check(|| format!("stage '{}'", stage.name))?;
     let mask = volume.foreground(stage.label);
     drop(volume); // Not needed past its mask: freed before the smoothing copies.
-    let image = mask.smoothed(stage.image_sigma)?;
+    let image = mask
+        .smoothed(stage.image_sigma)
+        .map_err(|e| CliError::Input(format!("stage '{}': image_sigma: {e}", stage.name)))?;
     let medial_of: Vec<usize> = template
         .medial_index()
         .iter()

@@ -221,6 +221,22 @@ fn dice_image_off_the_template_is_refused_with_both_boxes() {
 }
 
 #[test]
+fn smoothing_wider_than_the_image_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let stage = dice_stage(&toy("target.nii.gz")) + "image_sigma = 1e9\n";
+    let config = write_config(dir.path(), 20, &stage);
+    one_line_error(
+        &fit_args(&config, &dir.path().join("out"), &[]),
+        1,
+        &[
+            "stage 'dice': image_sigma: invalid parameter: Gaussian smoothing sigma 1000000000 mm \
+             is wider than the whole image (",
+            "mm across): the smoothed image would be flat",
+        ],
+    );
+}
+
+#[test]
 fn eval_refuses_a_penalty_weight_that_is_not_positive() {
     let dir = tempfile::tempdir().unwrap();
     let config = write_config(dir.path(), 2, &ssd_stage(&toy("affine.txt")));

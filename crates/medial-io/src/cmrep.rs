@@ -31,9 +31,9 @@ const MEDIAL_POINT_TOLERANCE: f64 = 1e-5;
 /// Largest tolerated `| |normal| − 1 |` of a normal used to place a medial point.
 const UNIT_NORMAL_TOLERANCE: f64 = 1e-3;
 
-/// Largest magnitude of a coordinate (mm) accepted: a kilometre a thousand times over. Past it
-/// the volumes, spoke lengths and kernel distances computed from the points lose their
-/// precision, or overflow, and the template's checks would report a wrong cause.
+/// Largest magnitude of a coordinate accepted, mm (a thousand kilometres): past it the volumes,
+/// spoke lengths and kernel distances computed from the points lose their precision or
+/// overflow, and the template's checks would report a wrong cause (an inward orientation).
 const MAX_COORDINATE: f64 = 1e9;
 
 /// Reads a cmrep template file (any legacy VTK polydata encoding and layout).
@@ -56,10 +56,10 @@ pub fn write_template(path: &Path, template: &MedialTemplate, options: WriteOpti
 /// [`TriMesh`](medial_core::TriMesh) refuses); [`Error::Format`] for a missing or malformed
 /// array (naming it and listing the arrays the file has), for a file from which medial points
 /// cannot be placed (neither `MedialPoint` nor `Radius` with normals), for inconsistent
-/// `MedialPoint` values of one atom, a non-unit normal, a radius that is not positive, a
-/// coordinate beyond ±10⁹ (mm), and for a
-/// `Tangency` that disagrees with the spoke counts (naming the atom); [`Error::Model`] when the
-/// engine refuses the template (open or inward mesh, atom with no or more than 3 spokes, …).
+/// `MedialPoint` values of one atom, a non-unit normal, a `Radius` that is not positive, a
+/// coordinate beyond ±10⁹ mm, and for a `Tangency` that disagrees with the spoke counts (naming
+/// the atom); [`Error::Model`] when the engine refuses the template (open or inward mesh, atom
+/// with no or more than 3 spokes, …).
 pub fn template_from_polydata(data: &PolyData, path: &Path) -> Result<MedialTemplate> {
     let mesh = data.to_trimesh(path)?;
     let arrays = Arrays { data, path };

@@ -124,11 +124,21 @@ impl Volume {
     /// `w_j ∝ exp(−j² / (2 σ_a²))`, `σ_a = sigma_mm / spacing_a`, `|j| ≤ ⌈4 σ_a⌉`, normalised to
     /// sum 1, with zeros outside the grid (total mass is kept unless it reaches the border).
     /// `sigma_mm = 0` returns a copy. Parallel over lines; the result does not depend on the
-    /// thread count. Refuses a negative or non-finite `sigma_mm`.
+    /// thread count. Refuses a negative or non-finite `sigma_mm`, and one wider than the grid's
+    /// diagonal (the voxel cells included), whose kernel would outgrow memory to give a flat
+    /// image.
     pub fn smoothed(&self, sigma_mm: f64) -> Result<Self> {
         if !(sigma_mm.is_finite() && sigma_mm >= 0.0) {
             return Err(Error::InvalidParameter(format!(
                 "Gaussian smoothing sigma must be finite and ≥ 0 mm, got {sigma_mm}"
+            )));
+        }
+        let diagonal =
+            (linear_part(&self.voxel_to_world) * Vec3::from(self.dims.map(|n| n as f64))).norm();
+        if sigma_mm > diagonal {
+            return Err(Error::InvalidParameter(format!(
+                "Gaussian smoothing sigma {sigma_mm} mm is wider than the whole image ({diagonal:.1} \
+                 mm across): the smoothed image would be flat"
             )));
         }
         let spacing = self.spacing();
@@ -452,6 +462,11 @@ mod tests {
         }
         assert!(random_volume([3, 3, 3], 1).smoothed(-1.0).is_err());
         assert!(random_volume([3, 3, 3], 1).smoothed(f64::NAN).is_err());
+        let err = random_volume([3, 3, 3], 1).smoothed(1e9).unwrap_err();
+        assert!(
+            err.to_string().contains("wider than the whole image"),
+            "{err}"
+        );
     }
 
     #[test]
