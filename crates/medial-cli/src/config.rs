@@ -309,7 +309,7 @@ impl Config {
         let text = std::fs::read_to_string(path).map_err(|e| CliError::io(path, e))?;
         let mut config: Config = toml::from_str(&text).map_err(|e| CliError::Config {
             path: path.into(),
-            message: e.to_string(),
+            message: toml_error(&text, &e),
         })?;
         // Absolute, so that the resolved config a fit writes names the same files anywhere.
         let folder = path.parent().filter(|p| !p.as_os_str().is_empty());
@@ -444,6 +444,24 @@ impl StageConfig {
     }
 }
 
+/// A TOML error on one line: `line L, column C: message` (the `Display` of `toml` quotes the
+/// line with a caret under it, over several lines).
+fn toml_error(text: &str, e: &toml::de::Error) -> String {
+    let message = e.message().trim().replace('\n', "; ");
+    match e.span() {
+        Some(span) => {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let column = before[before.rfind('\n').map_or(0, |n| n + 1)..]
+                .chars()
+                .count()
+                + 1;
+            format!("line {line}, column {column}: {message}")
+        }
+        None => message,
+    }
+}
+
 fn positive(name: &str, v: f64) -> Result<(), String> {
     if v.is_finite() && v > 0.0 {
         Ok(())
@@ -490,6 +508,18 @@ target = "s.vtk"
         let text = MINIMAL.replace("target =", "targte =");
         let err = toml::from_str::<Config>(&text).unwrap_err().to_string();
         assert!(err.contains("targte"), "{err}");
+    }
+
+    #[test]
+    fn toml_errors_take_one_line() {
+        let text = MINIMAL.replace("[model]", "[flow]\nsigam = 3.0\n[model]");
+        let e = toml::from_str::<Config>(&text).unwrap_err();
+        let m = toml_error(&text, &e);
+        assert!(
+            m.starts_with("line 3, column 1: unknown field `sigam`"),
+            "{m}"
+        );
+        assert!(!m.contains('\n'), "{m}");
     }
 
     #[test]

@@ -1,6 +1,8 @@
 //! The one error type of the command-line tool. Every message says what went wrong and where;
 //! `main` prints it and exits with a non-zero code.
 
+use crate::memory::{self, Estimate};
+use medial_core::mesh::Bounds;
 use std::path::{Path, PathBuf};
 
 /// What can stop a command.
@@ -34,6 +36,57 @@ pub enum CliError {
     /// written, marked as such. Exit code 4.
     #[error("{0}")]
     ConstraintsNotMet(String),
+    /// The memory estimate of a run passes the limit (`--max-memory`).
+    #[error(
+        "{what} would need {estimate}, more than the memory limit of {} (--max-memory GIB; \
+         default: the machine's total memory)",
+        memory::human(*limit)
+    )]
+    Memory {
+        /// What would need it.
+        what: String,
+        /// The estimate.
+        estimate: Estimate,
+        /// The limit, bytes.
+        limit: f64,
+    },
+    /// A Dice stage's image foreground lies where no sample of the template's interior sees
+    /// it: the fit would have no data gradient and end at once with a Dice of 0.
+    #[error(
+        "stage '{stage}': the image {} does not overlap the template: its foreground spans {} \
+         mm, the template's boundary {} mm (world coordinates); check the image's origin and \
+         orientation against the template's coordinates",
+        image.display(),
+        span(foreground),
+        span(template)
+    )]
+    NoOverlap {
+        /// The stage.
+        stage: String,
+        /// The image file.
+        image: PathBuf,
+        /// World bounding box of the image's foreground voxels, mm (boxed, like `template`,
+        /// to keep the error type small).
+        foreground: Box<Bounds>,
+        /// World bounding box of the template's boundary points, mm.
+        template: Box<Bounds>,
+    },
+    /// An SSD stage's `transform` is singular or reflects (determinant of its linear part
+    /// `≤ 0` or not finite): its targets would be the template flattened or turned inside out.
+    #[error(
+        "stage '{stage}': transform {} has determinant {determinant}: it must be positive \
+         (a singular matrix flattens the template, a negative one reflects it, turning it inside \
+         out)",
+        path.display()
+    )]
+    Transform {
+        /// The stage.
+        stage: String,
+        /// The matrix file.
+        path: PathBuf,
+        /// Determinant of the 3×3 linear part.
+        determinant: f64,
+    },
     /// An operating-system error outside the file layer (creating the output folder).
     #[error("{}: {source}", path.display())]
     Io {
@@ -64,4 +117,10 @@ impl CliError {
             source,
         }
     }
+}
+
+/// A bounding box as `[x0, x1] × [y0, y1] × [z0, z1]`.
+fn span(b: &Bounds) -> String {
+    let axis = |a: usize| format!("[{:.1}, {:.1}]", b.min[a], b.max[a]);
+    format!("{} × {} × {}", axis(0), axis(1), axis(2))
 }

@@ -7,6 +7,7 @@
 mod commands;
 mod config;
 mod error;
+mod memory;
 mod output;
 mod plan;
 mod progress;
@@ -31,6 +32,10 @@ struct Cli {
     /// No progress display (log lines and warnings still go to stderr).
     #[arg(long, short, global = true)]
     quiet: bool,
+    /// Refuse a run whose memory estimate passes this many GiB, before allocating it
+    /// [default: the machine's total memory, 16 where unknown].
+    #[arg(long, global = true, value_name = "GIB", value_parser = memory::parse_gib)]
+    max_memory: Option<f64>,
 }
 
 fn main() -> ExitCode {
@@ -53,6 +58,7 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<(), CliError> {
+    memory::set_limit(cli.max_memory);
     let threads = configure_threads(cli.threads)?;
     commands::run(cli.command, threads, cli.quiet)
 }

@@ -6,6 +6,7 @@ use crate::config::{
     AttachmentKind, Config, ConstraintUnitsConfig, MuUpdateConfig, StageConfig, VarifoldKindConfig,
 };
 use crate::error::CliError;
+use crate::memory::Estimate;
 use crate::summary::Figures;
 use medial_core::attachment::dice::{DiceAttachment, DiceParams};
 use medial_core::attachment::ssd::Ssd;
@@ -17,13 +18,21 @@ use medial_core::fit::optimize::LbfgsOptions;
 use medial_core::flow::{Flow, FlowParams};
 use medial_core::image::rasterize::voxel_dice;
 use medial_core::image::volume::Volume;
+use medial_core::mesh::Bounds;
 use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
 use medial_core::model::Model;
 use medial_core::{TriMesh, Vec3};
 
-/// The flow of a config for `landmarks` points.
+/// The flow of a config for `landmarks` points; refuses a flow whose fit would pass the memory
+/// limit ([`Estimate::flow`]).
 pub fn flow_of(config: &Config, landmarks: usize) -> Result<Flow, CliError> {
     let f = &config.flow;
+    Estimate::flow(config, landmarks).check(|| {
+        format!(
+            "a fit of {} time steps × {landmarks} landmarks",
+            f.time_steps
+        )
+    })?;
     let params = FlowParams {
         sigma: f.sigma,
         time_steps: f.time_steps,
@@ -161,6 +170,14 @@ fn ssd_targets(stage: &StageConfig, model: &Model) -> Result<Vec<Vec3>, CliError
     let nb = model.boundary_count();
     if let Some(path) = &stage.transform {
         let m = medial_io::affine::read_affine(path)?;
+        let determinant = m.matrix().fixed_view::<3, 3>(0, 0).determinant();
+        if !(determinant.is_finite() && determinant > 0.0) {
+            return Err(CliError::Transform {
+                stage: stage.name.clone(),
+                path: path.clone(),
+                determinant,
+            });
+        }
         return Ok(model.landmarks()[..nb]
             .iter()
             .map(|p| m.transform_point(&(*p).into()).coords)
@@ -210,7 +227,8 @@ fn varifold(stage: &StageConfig, model: &Model) -> Result<Varifold, CliError> {
 }
 
 /// The Dice attachment of a stage (the image's foreground, smoothed, against the model) and the
-/// foreground itself.
+/// foreground itself. Refuses a stage past the memory limit ([`Estimate::dice`]) and an image
+/// whose foreground no sample of the template's interior sees.
 fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), CliError> {
     let template = model.medial().ok_or_else(|| {
         CliError::Input(format!(
@@ -222,8 +240,19 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), 
         .image
         .as_deref()
         .expect("checked by the config: dice has image");
-    let mask = medial_io::volume::read_volume(path)?.foreground(stage.label);
-    let image = mask.smoothed(stage.image_sigma)?;
+    let volume = medial_io::volume::read_volume(path)?;
+    Estimate::dice(
+        stage,
+        template.boundary_triangles().len(),
+        template.landmark_count(),
+        volume.data().len(),
+    )
+    .check(|| format!("stage '{}'", stage.name))?;
+    let mask = volume.foreground(stage.label);
+    drop(volume); // Not needed past its mask: freed before the smoothing copies.
+    let image = mask
+        .smoothed(stage.image_sigma)
+        .map_err(|e| CliError::Input(format!("stage '{}': image_sigma: {e}", stage.name)))?;
     let medial_of: Vec<usize> = template
         .medial_index()
         .iter()
@@ -240,5 +269,14 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), 
         image,
         params,
     )?;
+    if attachment.dice(template.landmarks(), None)?.overlap <= 0.0 {
+        // The attachment has refused an empty foreground, the template has boundary points.
+        return Err(CliError::NoOverlap {
+            stage: stage.name.clone(),
+            image: path.into(),
+            foreground: Box::new(mask.support_bounds().expect("a foreground voxel")),
+            template: Box::new(Bounds::of(template.boundary_points()).expect("a boundary point")),
+        });
+    }
     Ok((attachment, mask))
 }

@@ -31,6 +31,11 @@ const MEDIAL_POINT_TOLERANCE: f64 = 1e-5;
 /// Largest tolerated `| |normal| − 1 |` of a normal used to place a medial point.
 const UNIT_NORMAL_TOLERANCE: f64 = 1e-3;
 
+/// Largest magnitude of a coordinate accepted, mm (a thousand kilometres): past it the volumes,
+/// spoke lengths and kernel distances computed from the points lose their precision or
+/// overflow, and the template's checks would report a wrong cause (an inward orientation).
+const MAX_COORDINATE: f64 = 1e9;
+
 /// Reads a cmrep template file (any legacy VTK polydata encoding and layout).
 ///
 /// Errors: as [`read_polydata`] and [`template_from_polydata`].
@@ -51,14 +56,18 @@ pub fn write_template(path: &Path, template: &MedialTemplate, options: WriteOpti
 /// [`TriMesh`](medial_core::TriMesh) refuses); [`Error::Format`] for a missing or malformed
 /// array (naming it and listing the arrays the file has), for a file from which medial points
 /// cannot be placed (neither `MedialPoint` nor `Radius` with normals), for inconsistent
-/// `MedialPoint` values of one atom, a non-unit normal or a negative radius, and for a
-/// `Tangency` that disagrees with the spoke counts (naming the atom); [`Error::Model`] when the
-/// engine refuses the template (open or inward mesh, atom with no or more than 3 spokes, …).
+/// `MedialPoint` values of one atom, a non-unit normal, a `Radius` that is not positive, a
+/// coordinate beyond ±10⁹ mm, and for a `Tangency` that disagrees with the spoke counts (naming
+/// the atom); [`Error::Model`] when the engine refuses the template (open or inward mesh, atom
+/// with no or more than 3 spokes, …).
 pub fn template_from_polydata(data: &PolyData, path: &Path) -> Result<MedialTemplate> {
     let mesh = data.to_trimesh(path)?;
     let arrays = Arrays { data, path };
+    arrays.check_coordinates(&data.points, "boundary point")?;
     let medial_index = arrays.integers(arrays.required("MedialIndex", 1)?)?;
+    arrays.check_radius()?;
     let medial_points = arrays.medial_points(&medial_index)?;
+    arrays.check_coordinates(&medial_points, "the medial point of atom")?;
     let template = MedialTemplate::new(mesh, medial_index, medial_points)
         .map_err(|e| Error::model(path, e))?;
     arrays.check_tangency(&template)?;
@@ -284,7 +293,8 @@ impl<'a> Arrays<'a> {
         }
     }
 
-    /// `p_b − Radius(b)·normal(b)`, refusing a negative radius or a non-unit normal.
+    /// `p_b − Radius(b)·normal(b)` (the radius checked by [`Self::check_radius`]), refusing a
+    /// non-unit normal.
     fn medial_point_from_radius(
         &self,
         radius: &DataArray,
@@ -293,12 +303,6 @@ impl<'a> Arrays<'a> {
     ) -> Result<Vec3> {
         let r = radius.values[b];
         let n = tuple3(normals, b);
-        if r < 0.0 {
-            return Err(self.error(format!(
-                "point array '{}' has value {r} at point {b}: a radius must be non-negative",
-                radius.name
-            )));
-        }
         if (n.norm() - 1.0).abs() > UNIT_NORMAL_TOLERANCE {
             return Err(self.error(format!(
                 "point array '{}' at point {b} is ({}, {}, {}), of length {}: cmrep normals \
@@ -311,6 +315,37 @@ impl<'a> Arrays<'a> {
             )));
         }
         Ok(self.data.points[b] - r * n)
+    }
+
+    /// `Radius`, when present (whether or not it places the medial points), must be positive:
+    /// it is the spoke length.
+    fn check_radius(&self) -> Result<()> {
+        let Some(radius) = self.optional("Radius", 1)? else {
+            return Ok(());
+        };
+        match radius.values.iter().position(|&r| r <= 0.0) {
+            Some(b) => Err(self.error(format!(
+                "point array '{}' has value {} at point {b}: a radius (the spoke length) must be \
+                 positive",
+                radius.name, radius.values[b]
+            ))),
+            None => Ok(()),
+        }
+    }
+
+    /// Refuses a coordinate beyond ±[`MAX_COORDINATE`]; `what` and the index name the point.
+    fn check_coordinates(&self, points: &[Vec3], what: &str) -> Result<()> {
+        match points
+            .iter()
+            .enumerate()
+            .find_map(|(i, p)| p.iter().find(|c| c.abs() > MAX_COORDINATE).map(|c| (i, *c)))
+        {
+            Some((i, c)) => Err(self.error(format!(
+                "{what} {i} has the coordinate {c:e}, beyond ±{MAX_COORDINATE:e} (mm): volumes, \
+                 spoke lengths and distances computed from it overflow or lose their precision"
+            ))),
+            None => Ok(()),
+        }
     }
 
     /// All spokes of an atom must carry the same `MedialPoint` (within float precision).

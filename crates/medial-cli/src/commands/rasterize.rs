@@ -2,6 +2,7 @@
 //! grid of a given image or on an axis-aligned grid around the mesh.
 
 use crate::error::CliError;
+use crate::memory;
 use crate::output::{model_error, print_json};
 use medial_core::image::rasterize::{grid_around, rasterize};
 use medial_io::nifti_volume::{write_nifti, NiftiType};
@@ -59,6 +60,7 @@ pub fn run(args: &RasterizeArgs) -> Result<(), CliError> {
             ))
         }
     };
+    memory::check_grid(dims)?;
     let mask = rasterize(&mesh, dims, voxel_to_world).map_err(|e| model_error(&args.mesh, e))?;
     write_nifti(&args.out, &mask, NiftiType::U8)?;
     let inside = mask.data().iter().filter(|&&v| v > 0.0).count();

@@ -54,3 +54,24 @@ pub fn s(p: &Path) -> &str {
 pub fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("{v} is not a number"))
 }
+
+/// The hint clap prints after the message of a wrong command line (following a blank line).
+const CLAP_HINT: &str = "For more information, try '--help'.";
+
+/// Runs the binary, asserts that it fails with exit code `code` and a message containing every
+/// `needles`, printed as exactly one line `error: …` (for a wrong command line, code 2, clap's
+/// hint may follow after a blank line); returns that line.
+pub fn one_line_error(args: &[&str], code: i32, needles: &[&str]) -> String {
+    let o = run_fails(args, needles);
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(code), "{args:?}: {err}");
+    let mut lines: Vec<&str> = err.lines().collect();
+    if code == 2 && lines.ends_with(&["", CLAP_HINT]) {
+        lines.truncate(lines.len() - 2);
+    }
+    assert!(
+        lines.len() == 1 && lines[0].starts_with("error: "),
+        "{args:?}: the error is not one line: {err:?}"
+    );
+    lines[0].to_owned()
+}

@@ -9,6 +9,7 @@
 use nalgebra::{Matrix3, Matrix4, Vector4};
 use rayon::prelude::*;
 
+use crate::mesh::Bounds;
 use crate::{Error, Result, Vec3};
 
 /// Relative size below which `|det|` of the 3×3 part (against the product of its column norms)
@@ -123,11 +124,21 @@ impl Volume {
     /// `w_j ∝ exp(−j² / (2 σ_a²))`, `σ_a = sigma_mm / spacing_a`, `|j| ≤ ⌈4 σ_a⌉`, normalised to
     /// sum 1, with zeros outside the grid (total mass is kept unless it reaches the border).
     /// `sigma_mm = 0` returns a copy. Parallel over lines; the result does not depend on the
-    /// thread count. Refuses a negative or non-finite `sigma_mm`.
+    /// thread count. Refuses a negative or non-finite `sigma_mm`, and one wider than the grid's
+    /// diagonal (the voxel cells included), whose kernel would outgrow memory to give a flat
+    /// image.
     pub fn smoothed(&self, sigma_mm: f64) -> Result<Self> {
         if !(sigma_mm.is_finite() && sigma_mm >= 0.0) {
             return Err(Error::InvalidParameter(format!(
                 "Gaussian smoothing sigma must be finite and ≥ 0 mm, got {sigma_mm}"
+            )));
+        }
+        let diagonal =
+            (linear_part(&self.voxel_to_world) * Vec3::from(self.dims.map(|n| n as f64))).norm();
+        if sigma_mm > diagonal {
+            return Err(Error::InvalidParameter(format!(
+                "Gaussian smoothing sigma {sigma_mm} mm is wider than the whole image ({diagonal:.1} \
+                 mm across): the smoothed image would be flat"
             )));
         }
         let spacing = self.spacing();
@@ -161,6 +172,33 @@ impl Volume {
             value,
             linear_part(&self.world_to_voxel).transpose() * grad_voxel,
         )
+    }
+
+    /// The world bounding box (mm) of the voxels with a non-zero value, each voxel the cell of
+    /// ±½ voxel about its centre along every voxel axis; `None` when every value is 0.
+    pub fn support_bounds(&self) -> Option<Bounds> {
+        let [nx, ny, _] = self.dims;
+        let mut range: Option<([usize; 3], [usize; 3])> = None;
+        for (n, _) in self.data.iter().enumerate().filter(|(_, &v)| v != 0.0) {
+            let index = [n % nx, (n / nx) % ny, n / (nx * ny)];
+            let (lo, hi) = range.get_or_insert((index, index));
+            for a in 0..3 {
+                lo[a] = lo[a].min(index[a]);
+                hi[a] = hi[a].max(index[a]);
+            }
+        }
+        let (lo, hi) = range?;
+        let corners: Vec<Vec3> = (0..8)
+            .map(|c: usize| {
+                let index = Vector4::from_fn(|a, _| match a {
+                    3 => 1.0,
+                    _ if c >> a & 1 == 0 => lo[a] as f64 - 0.5,
+                    _ => hi[a] as f64 + 0.5,
+                });
+                (self.voxel_to_world * index).xyz()
+            })
+            .collect();
+        Bounds::of(&corners)
     }
 
     /// `∫ f = Σ values × voxel volume` (mm³ for a mask).
@@ -264,29 +302,41 @@ pub(crate) fn voxel_count(dims: [usize; 3]) -> Result<usize> {
 
 /// Checks that `m` is a finite, non-degenerate affine map and returns its inverse.
 pub(crate) fn check_affine(m: &Matrix4<f64>) -> Result<Matrix4<f64>> {
+    let text = rows(m);
     if !m.iter().all(|c| c.is_finite()) {
-        return Err(Error::NonFinite(format!("voxel-to-world matrix {m}")));
+        return Err(Error::NonFinite(format!("voxel-to-world matrix {text}")));
     }
     if m.row(3) != nalgebra::RowVector4::new(0.0, 0.0, 0.0, 1.0) {
         return Err(Error::InvalidVolume(format!(
-            "voxel-to-world matrix is not affine: last row is {} (must be 0 0 0 1)",
-            m.row(3)
+            "voxel-to-world matrix {text} is not affine: its last row must be 0 0 0 1"
         )));
     }
     let a = linear_part(m);
     if let Some(c) = (0..3).find(|&c| a.column(c).norm() == 0.0) {
         return Err(Error::InvalidVolume(format!(
-            "voxel-to-world matrix has a zero column {c} (voxel axis {c} has no extent): {m}"
+            "voxel-to-world matrix has a zero column {c} (voxel axis {c} has no extent): {text}"
         )));
     }
     let scale: f64 = (0..3).map(|c| a.column(c).norm()).product();
     if a.determinant().abs() < DEGENERATE_SINE * scale {
         return Err(Error::InvalidVolume(format!(
-            "voxel-to-world matrix is singular (voxel axes are coplanar): {m}"
+            "voxel-to-world matrix is singular (voxel axes are coplanar): {text}"
         )));
     }
     m.try_inverse()
-        .ok_or_else(|| Error::InvalidVolume(format!("voxel-to-world matrix {m} has no inverse")))
+        .ok_or_else(|| Error::InvalidVolume(format!("voxel-to-world matrix {text} has no inverse")))
+}
+
+/// `m` on one line, row by row: `[[a, b, c, d], [e, …], …]` (nalgebra's `Display` spans lines).
+fn rows(m: &Matrix4<f64>) -> String {
+    let rows: Vec<String> = m
+        .row_iter()
+        .map(|r| {
+            let entries: Vec<String> = r.iter().map(|x| x.to_string()).collect();
+            format!("[{}]", entries.join(", "))
+        })
+        .collect();
+    format!("[{}]", rows.join(", "))
 }
 
 /// Normalised Gaussian weights `w_{−R..=R}`, `R = ⌈4σ⌉`, for a standard deviation in voxels.
@@ -401,8 +451,22 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("last row"));
+        let mut nan_matrix = m;
+        nan_matrix[(0, 3)] = f64::NAN;
+        for bad in [flat, coplanar, projective, nan_matrix] {
+            let err = Volume::new([2, 2, 2], vec![0.0; 8], bad)
+                .unwrap_err()
+                .to_string();
+            assert!(!err.contains('\n'), "one line: {err}");
+            assert!(err.contains("[[1, 0, "), "the matrix row by row: {err}");
+        }
         assert!(random_volume([3, 3, 3], 1).smoothed(-1.0).is_err());
         assert!(random_volume([3, 3, 3], 1).smoothed(f64::NAN).is_err());
+        let err = random_volume([3, 3, 3], 1).smoothed(1e9).unwrap_err();
+        assert!(
+            err.to_string().contains("wider than the whole image"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -492,6 +556,35 @@ mod tests {
                 .install(|| v.smoothed(1.3).unwrap())
         };
         assert_eq!(run(1).data(), run(2).data());
+    }
+
+    #[test]
+    fn support_bounds_cover_the_non_zero_voxels() {
+        let mut data = vec![0.0; 4 * 3 * 2];
+        assert_eq!(
+            Volume::new([4, 3, 2], data.clone(), oblique())
+                .unwrap()
+                .support_bounds(),
+            None
+        );
+        data[1 + 4 * (2 + 3)] = 1.0; // voxel (1, 2, 1)
+        data[2] = 0.5;
+        let v = Volume::new([4, 3, 2], data, oblique()).unwrap();
+        let b = v.support_bounds().unwrap();
+        // The voxel cells of indices 1…2 × 0…2 × 0…1 (±½ voxel), mapped to the world.
+        let corners: Vec<Vec3> = (0..8usize)
+            .map(|c| {
+                let index = Vector4::new(
+                    [0.5, 2.5][c & 1],
+                    [-0.5, 2.5][(c >> 1) & 1],
+                    [-0.5, 1.5][(c >> 2) & 1],
+                    1.0,
+                );
+                (v.voxel_to_world() * index).xyz()
+            })
+            .collect();
+        let expected = Bounds::of(&corners).unwrap();
+        assert!((b.min - expected.min).norm() < 1e-12 && (b.max - expected.max).norm() < 1e-12);
     }
 
     #[test]

@@ -9,15 +9,12 @@
 //! rasterized warped shape, the affine part and two configs: `fit_boundary.toml` (constrained
 //! SSD to the warped points) and `fit.toml` (the paper's affine SSD → Dice schedule).
 
-use super::{CaseFiles, SynthArgs};
+use super::{target_image, CaseFiles, SynthArgs};
 use crate::error::CliError;
 use crate::output::{model_error, print_json, TemplateSummary};
 use crate::plan::{Geometry, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE};
 use medial_core::mesh::topology::signed_volume;
-
-use medial_core::synth::{
-    boundary_mesh, target_boundary, target_image, target_surface, PrincipalAxes, Warp,
-};
+use medial_core::synth::{boundary_mesh, target_boundary, target_surface, PrincipalAxes, Warp};
 use medial_core::Vec3;
 use nalgebra::{Matrix4, Rotation3, Unit};
 use serde::Serialize;

@@ -10,11 +10,13 @@
 mod from_template;
 
 use crate::error::CliError;
+use crate::memory;
 use crate::output::{print_json, write_options, write_text, TemplateSummary};
 use crate::plan::{FitPlan, PAPER_SCHEDULE_NOTE};
+use medial_core::image::rasterize::grid_around;
 use medial_core::image::volume::Volume;
 use medial_core::model::template::MedialTemplate;
-use medial_core::synth::{Shape, SyntheticCase};
+use medial_core::synth::{self, Shape, SyntheticCase};
 use medial_core::TriMesh;
 use medial_io::nifti_volume::{write_nifti, NiftiType};
 use medial_io::vtk::{self, PolyData};
@@ -30,9 +32,10 @@ pub struct SynthArgs {
     #[arg(
         value_name = "SHAPE",
         required_unless_present = "from",
-        conflicts_with = "from"
+        conflicts_with = "from",
+        value_parser = parse_shape
     )]
-    pub shape: Option<String>,
+    pub shape: Option<Shape>,
     /// Make the case from this cmrep template instead (legacy VTK polydata with a MedialIndex
     /// point array; coordinates in mm): a twist + bend of its long principal axis, then an
     /// affine map; writes fit_boundary.toml (constrained SSD to the warped points) beside
@@ -50,6 +53,18 @@ pub struct SynthArgs {
     pub margin: f64,
     #[command(flatten)]
     pub warp: from_template::WarpArgs,
+}
+
+/// The built-in shape called `name` (any case); an unknown name is a command-line error (exit
+/// 2) that lists the shapes.
+fn parse_shape(name: &str) -> Result<Shape, String> {
+    Shape::from_name(name).map_err(|_| {
+        let names: Vec<&str> = Shape::ALL.iter().map(|s| s.name()).collect();
+        format!(
+            "the built-in shapes are {} (or give --from TEMPLATE.vtk)",
+            names.join(", ")
+        )
+    })
 }
 
 /// The fit settings of the built-in shapes (σ about their half thickness).
@@ -87,18 +102,17 @@ struct SynthSummary {
 pub fn run(args: &SynthArgs) -> Result<(), CliError> {
     match (&args.shape, &args.from) {
         (_, Some(template)) => from_template::run(args, template),
-        (Some(name), None) => run_shape(args, name),
+        (Some(shape), None) => run_shape(args, *shape),
         (None, None) => unreachable!("clap requires a shape or --from"),
     }
 }
 
 /// Builds the case of a built-in shape and writes `template.vtk`, `target.nii.gz`,
 /// `target_boundary.vtk`, `affine.txt` and `fit.toml` into the folder; prints a summary.
-fn run_shape(args: &SynthArgs, name: &str) -> Result<(), CliError> {
-    let shape = Shape::from_name(name).map_err(|e| CliError::Input(e.to_string()))?;
+fn run_shape(args: &SynthArgs, shape: Shape) -> Result<(), CliError> {
     let spacing = args.spacing.unwrap_or_else(|| shape.image_spacing_mm());
     let case = SyntheticCase::build(shape)?;
-    let image = case.target_image(spacing, args.margin)?;
+    let image = target_image(&case.target_surface()?, spacing, args.margin)?;
     let name = shape.name();
     let header = format!(
         "# Synthetic case '{name}', written by `medial synth {name}`.
@@ -132,6 +146,14 @@ fn run_shape(args: &SynthArgs, name: &str) -> Result<(), CliError> {
         image_spacing_mm: spacing,
         target_volume_mm3: image.integral(),
     })
+}
+
+/// The target segmentation of a case ([`synth::target_image`]): `surface` rasterized on a grid
+/// of `spacing_mm` with `margin_mm` around it; refused past the memory limit.
+fn target_image(surface: &TriMesh, spacing_mm: f64, margin_mm: f64) -> Result<Volume, CliError> {
+    let (dims, _) = grid_around(surface, spacing_mm, margin_mm)?;
+    memory::check_grid(dims)?;
+    Ok(synth::target_image(surface, spacing_mm, margin_mm)?)
 }
 
 /// The files of a synthetic case, as `medial synth` writes them.
