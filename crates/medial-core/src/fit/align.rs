@@ -19,7 +19,7 @@
 
 use crate::image::rasterize::{grid_around, rasterize, voxel_dice};
 use crate::image::Volume;
-use crate::mesh::TriMesh;
+use crate::mesh::{centroid_and_covariance, TriMesh};
 use crate::{Error, Result, Vec3};
 use nalgebra::{Matrix3, Matrix4, SymmetricEigen};
 
@@ -50,15 +50,9 @@ impl Moments {
                 "the image has no foreground to align to".into(),
             ));
         }
-        let n = points.len() as f64;
-        let centroid = points.iter().sum::<Vec3>() / n;
-        let covariance = points
-            .iter()
-            .map(|p| (p - centroid) * (p - centroid).transpose())
-            .sum::<Matrix3<f64>>()
-            / n;
+        let (centroid, covariance) = centroid_and_covariance(&points);
         Ok(Self {
-            volume: n * mask.voxel_volume(),
+            volume: points.len() as f64 * mask.voxel_volume(),
             centroid,
             covariance,
         })

@@ -50,3 +50,16 @@ impl TriMesh {
         (self.points, self.triangles)
     }
 }
+
+/// The centroid `c = Σ p / n` and the covariance `Σ (p − c)(p − c)ᵀ / n` of `points` (mm, mm²);
+/// `points` must not be empty.
+pub fn centroid_and_covariance(points: &[Vec3]) -> (Vec3, nalgebra::Matrix3<f64>) {
+    let n = points.len() as f64;
+    let centroid = points.iter().sum::<Vec3>() / n;
+    let covariance = points
+        .iter()
+        .map(|p| (p - centroid) * (p - centroid).transpose())
+        .sum::<nalgebra::Matrix3<f64>>()
+        / n;
+    (centroid, covariance)
+}

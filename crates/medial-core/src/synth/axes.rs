@@ -1,6 +1,6 @@
 //! Principal axes of a point set: the frame of the twist and bend of a general template.
 
-use crate::mesh::Bounds;
+use crate::mesh::{centroid_and_covariance, Bounds};
 use crate::{Error, Result, Vec3};
 use nalgebra::{Matrix3, Rotation3};
 
@@ -39,13 +39,7 @@ impl PrincipalAxes {
                 "principal axes need at least one point".into(),
             ));
         }
-        let n = points.len() as f64;
-        let mean = points.iter().sum::<Vec3>() / n;
-        let covariance = points
-            .iter()
-            .map(|p| (p - mean) * (p - mean).transpose())
-            .sum::<Matrix3<f64>>()
-            / n;
+        let (mean, covariance) = centroid_and_covariance(points);
         let eigen = covariance.symmetric_eigen();
         let mut order = [0, 1, 2];
         order.sort_by(|&a, &b| eigen.eigenvalues[a].total_cmp(&eigen.eigenvalues[b]));
