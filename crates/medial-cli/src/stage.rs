@@ -268,7 +268,8 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), 
         template.landmark_count(),
         image,
         params,
-    )?;
+    )
+    .map_err(|e| CliError::Input(format!("stage '{}': {}: {e}", stage.name, path.display())))?;
     if attachment.dice(template.landmarks(), None)?.overlap <= 0.0 {
         // The attachment has refused an empty foreground, the template has boundary points.
         return Err(CliError::NoOverlap {

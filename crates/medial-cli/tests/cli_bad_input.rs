@@ -237,6 +237,23 @@ fn smoothing_wider_than_the_image_is_refused() {
 }
 
 #[test]
+fn a_label_absent_from_the_image_names_the_stage_and_the_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let stage = dice_stage(&toy("target.nii.gz")) + "label = 7\n";
+    let config = write_config(dir.path(), 20, &stage);
+    one_line_error(
+        &fit_args(&config, &dir.path().join("out"), &[]),
+        1,
+        &[
+            "stage 'dice'",
+            "target.nii.gz",
+            "no foreground",
+            "check the label",
+        ],
+    );
+}
+
+#[test]
 fn eval_refuses_a_penalty_weight_that_is_not_positive() {
     let dir = tempfile::tempdir().unwrap();
     let config = write_config(dir.path(), 2, &ssd_stage(&toy("affine.txt")));
@@ -245,13 +262,11 @@ fn eval_refuses_a_penalty_weight_that_is_not_positive() {
     let eval = |mu: &str| {
         let mu = format!("--mu={mu}");
         let args = ["eval", s(&config), "--momenta", s(&momenta), &mu];
+        // A wrong command line: exit 2.
         one_line_error(
             &args,
-            1,
-            &[
-                &mu.replace('=', " "),
-                "the penalty weight μ must be a positive number",
-            ],
+            2,
+            &["--mu", "the penalty weight μ must be a positive number"],
         )
     };
     for mu in ["-1", "0", "NaN", "inf"] {

@@ -13,7 +13,7 @@ pub struct EvalOptions {
     pub momenta: PathBuf,
     /// Stage whose objective is evaluated (default: the first).
     pub stage: Option<String>,
-    /// μ (default: the stage's).
+    /// μ, positive (checked by the command line; default: the stage's).
     pub mu: Option<f64>,
     /// Multipliers `[N, L]` (default: zeros).
     pub lambda: Option<PathBuf>,
@@ -23,11 +23,6 @@ pub struct EvalOptions {
 
 /// Evaluates and returns the figures (and writes the gradient if asked).
 pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> {
-    if let Some(mu) = options.mu.filter(|mu| !(mu.is_finite() && *mu > 0.0)) {
-        return Err(CliError::Input(format!(
-            "--mu {mu}: the penalty weight μ must be a positive number"
-        )));
-    }
     let stage_cfg = match &options.stage {
         Some(name) => config.stage(name).ok_or_else(|| {
             let names: Vec<&str> = config.stages.iter().map(|s| s.name.as_str()).collect();

@@ -43,8 +43,8 @@ pub enum Command {
         /// Stage whose objective is evaluated [default: the first].
         #[arg(long, value_name = "NAME")]
         stage: Option<String>,
-        /// Penalty weight μ [default: the stage's mu].
-        #[arg(long, value_name = "X")]
+        /// Penalty weight μ, positive [default: the stage's mu].
+        #[arg(long, value_name = "X", value_parser = positive_mu)]
         mu: Option<f64>,
         /// Lagrange multipliers, .npy of shape [N, L] [default: zeros].
         #[arg(long, value_name = "LAM.npy")]
@@ -65,6 +65,16 @@ pub enum Command {
     Synth(synth::SynthArgs),
     /// Rasterize a closed triangle mesh into a binary NIfTI mask.
     Rasterize(rasterize::RasterizeArgs),
+}
+
+/// Parses `--mu`: a positive, finite penalty weight.
+fn positive_mu(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(mu) if mu.is_finite() && mu > 0.0 => Ok(mu),
+        _ => Err(format!(
+            "the penalty weight μ must be a positive number, got '{text}'"
+        )),
+    }
 }
 
 /// Runs `command` with `threads` worker threads in use.
