@@ -2,7 +2,7 @@
 //! meeting along a seam) against its target image, Dice with the medial constraints on and μ
 //! rising tenfold over six augmented-Lagrangian iterations.
 //!
-//! `cargo run --release --example fit_segmentation` (about 10 s on 2 cores).
+//! `cargo run --release --example fit_segmentation` (about 5 s on 2 cores).
 
 use medial::attachment::dice::{DiceAttachment, DiceParams};
 use medial::fit::{run_stages, AlSchedule, FitEvent, Guard, LbfgsOptions, PlannedStage, Stage};

@@ -124,26 +124,28 @@ impl FitPlan {
 
     /// The Dice stage of the paper's schedule against `image`.
     fn dice_stage(&self, image: PathBuf) -> StageConfig {
-        let mut dice = StageConfig::new("dice", AttachmentKind::Dice);
+        let mut dice = constrained(
+            "dice",
+            AttachmentKind::Dice,
+            0.02,
+            DICE_AL_ITERATIONS,
+            self.dice_iterations,
+        );
         dice.image = Some(image);
-        dice.constraint_units = ConstraintUnitsConfig::Relative;
-        dice.mu = 0.02;
-        dice.mu_factor = 10.0;
-        dice.al_iterations = DICE_AL_ITERATIONS;
-        dice.max_iterations = self.dice_iterations;
         dice
     }
 
     /// The constrained SSD stage to corresponding points `target`.
     fn boundary_stage(&self, target: PathBuf) -> StageConfig {
-        let mut boundary = StageConfig::new("boundary", AttachmentKind::Ssd);
+        let mut boundary = constrained(
+            "boundary",
+            AttachmentKind::Ssd,
+            20.0,
+            BOUNDARY_AL_ITERATIONS,
+            self.boundary_iterations,
+        );
         boundary.target = Some(target);
         boundary.constraints = Some(true);
-        boundary.constraint_units = ConstraintUnitsConfig::Relative;
-        boundary.mu = 20.0;
-        boundary.mu_factor = 10.0;
-        boundary.al_iterations = BOUNDARY_AL_ITERATIONS;
-        boundary.max_iterations = self.boundary_iterations;
         boundary
     }
 
@@ -165,6 +167,24 @@ impl FitPlan {
             stages,
         }
     }
+}
+
+/// A stage with the medial constraints in relative units and μ rising tenfold from `mu` over
+/// `al_iterations` AL iterations of `max_iterations` L-BFGS iterations each.
+fn constrained(
+    name: &str,
+    attachment: AttachmentKind,
+    mu: f64,
+    al_iterations: usize,
+    max_iterations: usize,
+) -> StageConfig {
+    let mut stage = StageConfig::new(name, attachment);
+    stage.constraint_units = ConstraintUnitsConfig::Relative;
+    stage.mu = mu;
+    stage.mu_factor = 10.0;
+    stage.al_iterations = al_iterations;
+    stage.max_iterations = max_iterations;
+    stage
 }
 
 /// The comment line of `fit.toml` on its schedule.

@@ -84,7 +84,8 @@ pub struct StageSummary {
     /// Restarts of L-BFGS from a sound iterate after an unsound one.
     pub restarts: usize,
     /// Constrained stages: whether the final max spoke–normal angle and max spoke mismatch are
-    /// within the stage's `tolerance_deg` and `tolerance_pct`.
+    /// within the stage's `tolerance_deg` and `tolerance_pct` (for the last stage: at every
+    /// time point of the fitted flow).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub constraints_met: Option<bool>,
     /// Set when the stage ended at an unsound iterate: where and why.

@@ -273,7 +273,7 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
     }
     progress.finish();
     let seconds = start.elapsed().as_secs_f64();
-    let stages = config
+    let mut stages = config
         .stages
         .iter()
         .zip(&prepared)
@@ -304,6 +304,10 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
     if !points.is_empty() {
         time_points::write_csv(&options.out.join("time_points.csv"), &points)?;
     }
+    let last_planned = &planned[stages.len() - 1];
+    let last_config = &config.stages[stages.len() - 1];
+    let last = stages.last_mut().expect("a config has a stage");
+    judge_flow(last, last_planned, last_config, &trajectory, &points);
     let last = stages.last().expect("a config has a stage");
     let status = if last.unsound.is_some() {
         Status::Unsound
@@ -314,7 +318,7 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
     } else {
         Status::Budget
     };
-    let failure = failure(status, last, &config.stages[stages.len() - 1], &options.out);
+    let failure = failure(status, last, last_config, &options.out);
     let summary = Summary {
         version: env!("CARGO_PKG_VERSION"),
         status,
@@ -373,6 +377,34 @@ fn stage_summary(
             )
         }),
         figures,
+    }
+}
+
+/// Judges the whole fitted flow, not only its end, for the last stage `last`: a fold at any
+/// time point makes it unsound, and a constrained stage meets its tolerances only if the worst
+/// spoke figures over time points 1 … N do.
+fn judge_flow(
+    last: &mut StageSummary,
+    planned: &PlannedStage<'_>,
+    cfg: &StageConfig,
+    trajectory: &Trajectory,
+    points: &[time_points::TimePoint],
+) {
+    if last.unsound.is_none() {
+        let guard = planned
+            .stage
+            .guard
+            .expect("the fit gives every stage a guard");
+        last.unsound = (1..trajectory.time_points()).find_map(|n| {
+            let cause = guard.check_fold(trajectory.positions(n)).err()?;
+            Some(format!("time point {n} of the fitted flow: {cause}"))
+        });
+    }
+    if let (Some(true), Some(worst)) = (last.constraints_met, time_points::over_time(points)) {
+        last.constraints_met = Some(
+            worst.max_spoke_normal_deg <= cfg.tolerance_deg
+                && worst.max_spoke_mismatch_pct <= cfg.tolerance_pct,
+        );
     }
 }
 
