@@ -307,10 +307,7 @@ impl Config {
     /// Reads, parses, resolves paths against the file's folder and checks the config.
     pub fn load(path: &Path) -> Result<Self, CliError> {
         let text = std::fs::read_to_string(path).map_err(|e| CliError::io(path, e))?;
-        let mut config: Config = toml::from_str(&text).map_err(|e| CliError::Config {
-            path: path.into(),
-            message: toml_error(&text, &e),
-        })?;
+        let mut config = Self::parse(&text, path)?;
         // Absolute, so that the resolved config a fit writes names the same files anywhere.
         let folder = path.parent().filter(|p| !p.as_os_str().is_empty());
         let base = std::path::absolute(folder.unwrap_or(Path::new(".")))
@@ -321,6 +318,15 @@ impl Config {
             message,
         })?;
         Ok(config)
+    }
+
+    /// Parses the TOML `text` of the file `path` (named in errors), without resolving paths or
+    /// checking values: what [`Config::load`] does first.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, CliError> {
+        toml::from_str(text).map_err(|e| CliError::Config {
+            path: path.into(),
+            message: toml_error(text, &e),
+        })
     }
 
     fn resolve(&mut self, base: &Path) {
@@ -339,7 +345,9 @@ impl Config {
         }
     }
 
-    fn check(&self) -> Result<(), String> {
+    /// Checks the values that TOML types cannot (positive σ, known stage names, …): the
+    /// message names the key.
+    pub fn check(&self) -> Result<(), String> {
         let f = &self.flow;
         positive("flow.sigma", f.sigma)?;
         non_negative("flow.kinetic_weight", f.kinetic_weight)?;

@@ -1,0 +1,80 @@
+//! `medial`: diffeomorphic medial modeling from the command line. The binary's `main` calls
+//! [`main`]; the library exists so that the fuzz targets (`fuzz/`) reach the config parser.
+//!
+//! Data flows one way: [`config`] reads a TOML schedule, [`stage`] assembles what the engine runs,
+//! the [`commands`] run it, and [`summary`], [`progress`], [`time_points`] and [`output`] write
+//! what a user reads.
+
+mod commands;
+pub mod config;
+mod error;
+mod memory;
+mod output;
+mod plan;
+mod progress;
+mod stage;
+mod summary;
+mod time_points;
+
+use clap::Parser;
+pub use error::CliError;
+use std::process::ExitCode;
+
+/// Fit medial templates of sheet-like structures (heart wall, placenta, valve leaflets,
+/// cartilage) to subjects with a diffeomorphic flow that keeps the medial axis medial.
+#[derive(Parser)]
+#[command(name = "medial", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: commands::Command,
+    /// Worker threads (default: all cores). Results are bit-identical for any count.
+    #[arg(long, global = true, value_name = "N")]
+    threads: Option<usize>,
+    /// No progress display (log lines and warnings still go to stderr).
+    #[arg(long, short, global = true)]
+    quiet: bool,
+    /// Refuse a run whose memory estimate passes this many GiB, before allocating it
+    /// [default: the machine's total memory, 16 where unknown].
+    #[arg(long, global = true, value_name = "GIB", value_parser = memory::parse_gib)]
+    max_memory: Option<f64>,
+}
+
+/// Parses the command line, runs the command, prints an error as one line; the exit code.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    tracing_subscriber::fmt()
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("MEDIAL_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .init();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(e.exit_code())
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<(), CliError> {
+    memory::set_limit(cli.max_memory);
+    let threads = configure_threads(cli.threads)?;
+    commands::run(cli.command, threads, cli.quiet)
+}
+
+/// Sets the size of rayon's global pool; returns the number of threads in use.
+fn configure_threads(threads: Option<usize>) -> Result<usize, CliError> {
+    if let Some(n) = threads {
+        if n == 0 {
+            return Err(CliError::Input("--threads must be at least 1".into()));
+        }
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .map_err(|e| CliError::Input(format!("cannot start {n} threads: {e}")))?;
+    }
+    Ok(rayon::current_num_threads())
+}
