@@ -497,9 +497,47 @@ fn gradient_case() -> (Model, DiceAttachment, Vec<Vec3>) {
 #[test]
 fn gradient_matches_central_differences() {
     let (_, dice, q) = gradient_case();
-    let mut grad = vec![Vec3::zeros(); q.len()];
-    let v = dice.dice(&q, Some(&mut grad)).unwrap();
+    let v = dice.dice(&q, None).unwrap();
     assert!(v.dice > 0.3 && v.dice < 0.95, "{v:?}");
+    assert_gradient_matches_central_differences(&dice, &q);
+}
+
+/// Pushes the medial point of the disc's centre atom `by` along +z, out through the top
+/// boundary when `by` passes the half thickness: the prisms above it turn inside out.
+fn centre_pushed(disc: &Model, q: &[Vec3], by: f64) -> Vec<Vec3> {
+    let mut q = q.to_vec();
+    q[disc.medial_of[0]].z += by;
+    q
+}
+
+/// A fold is never rewarded: a medial point pushed out through the boundary into the
+/// background turns prisms inside out there, and the Dice falls (SPEC §5's signed
+/// denominator `V + V_img` would let it rise), with an exact gradient at the folded model.
+#[test]
+fn a_fold_lowers_the_dice() {
+    let (disc, dice, q) = gradient_case();
+    let sound = dice.dice(&q, None).unwrap();
+    let folded_q = centre_pushed(&disc, &q, 10.0);
+    let folded = dice.dice(&folded_q, None).unwrap();
+    let signed = 2.0 * folded.overlap / (folded.model_volume + folded.image_volume);
+    println!(
+        "sound {:.4}, folded {:.4} (negative volume {:.2} mm³); signed denominator {signed:.4}",
+        sound.dice, folded.dice, folded.negative_volume
+    );
+    assert!(folded.negative_volume < -1.0, "{folded:?}");
+    assert!(folded.dice < sound.dice - 0.005, "{sound:?} vs {folded:?}");
+    assert!(
+        signed > folded.dice + 0.005,
+        "the signed denominator would hide the fold"
+    );
+    assert_gradient_matches_central_differences(&dice, &folded_q);
+}
+
+/// `∇DSC` of `dice` at `q` against central differences, every component.
+fn assert_gradient_matches_central_differences(dice: &DiceAttachment, q: &[Vec3]) {
+    let q = q.to_vec();
+    let mut grad = vec![Vec3::zeros(); q.len()];
+    dice.dice(&q, Some(&mut grad)).unwrap();
     let h = 1e-5;
     let value = |q: &[Vec3]| dice.dice(q, None).unwrap().dice;
     let mut fd = vec![Vec3::zeros(); q.len()];

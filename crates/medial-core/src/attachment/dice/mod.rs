@@ -17,12 +17,20 @@
 //!
 //! **Dice.** With `f` the trilinear interpolant of the smoothed image (0 outside), each prism
 //! gives a third of its volume to each of the three samples half way up its sides:
-//! `O = Σ_P vol_P F_P`, `F_P = (1/3) Σ_{j∈P} f(y_j)`, `V = Σ_P vol_P`,
-//! `DSC = 2 O / (V + V_img)`, `V_img = ∫ f`.
+//! `O = Σ_P vol_P F_P`, `F_P = (1/3) Σ_{j∈P} f(y_j)`, `V_abs = Σ_P |vol_P|`,
+//! `DSC = 2 O / (V_abs + V_img)`, `V_img = ∫ f`.
 //!
-//! **Gradient.** `∂DSC = 2 ∂O / (V + V_img) − 2 O ∂V / (V + V_img)²`, with
-//! `∂O = Σ_P [F_P Σ_{c∈P} ∂vol_P/∂x_c + (vol_P/3) Σ_{j∈P} ∇f(y_j)]`, `∂vol/∂p = (q × r)/6`
-//! for each face `(p, q, r)`, and the linear maps from corners and samples back to landmarks.
+//! **Folds are not rewarded; a departure from SPEC §5.** SPEC §5 divides by the signed volume
+//! `V = Σ_P vol_P`. A prism turned inside out outside the foreground (a medial point pushed
+//! through the boundary, `F_P ≈ 0`) then lowers `V` and *raises* the Dice: the optimiser is paid
+//! to fold. With `V_abs = V − 2 Σ_P min(vol_P, 0)` each folded prism adds its volume to the
+//! denominator, so a fold lowers the Dice wherever it is; without folds `V_abs = V` and the
+//! value is SPEC §5's, bit for bit.
+//!
+//! **Gradient.** `∂DSC = 2 ∂O / (V_abs + V_img) − 2 O ∂V_abs / (V_abs + V_img)²`, with
+//! `∂O = Σ_P [F_P Σ_{c∈P} ∂vol_P/∂x_c + (vol_P/3) Σ_{j∈P} ∇f(y_j)]`,
+//! `∂V_abs = Σ_P sign(vol_P) Σ_{c∈P} ∂vol_P/∂x_c`, `∂vol/∂p = (q × r)/6` for each face
+//! `(p, q, r)`, and the linear maps from corners and samples back to landmarks.
 //!
 //! **Accuracy; a departure from SPEC §5.** SPEC §5 gives each prism's volume to its six
 //! corners. That is a trapezoidal rule across the layers whose boundary samples sit on the
@@ -78,7 +86,7 @@ impl Default for DiceParams {
 /// One evaluation of the Dice attachment. Volumes in mm³ (world units cubed).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DiceValue {
-    /// `DSC = 2 O / (V + V_img)`.
+    /// `DSC = 2 O / (V_abs + V_img)`, `V_abs = V − 2 · negative_volume`.
     pub dice: f64,
     /// `V`: the model volume, sum of the signed prism volumes.
     pub model_volume: f64,
@@ -180,7 +188,7 @@ impl DiceAttachment {
         &self.image
     }
 
-    /// `DSC = 2 O / (V + V_img)` at landmark positions `q` (`k` points) and, if `grad` is
+    /// `DSC = 2 O / (V_abs + V_img)` at landmark positions `q` (`k` points) and, if `grad` is
     /// given (`k` vectors, overwritten), its exact gradient `grad[i] = ∂DSC/∂q_i`.
     ///
     /// Refuses `q` or `grad` of the wrong length. Non-finite positions give NaN, not an error
@@ -209,7 +217,7 @@ impl DiceAttachment {
             .into_iter()
             .reduce(ChunkSums::add)
             .unwrap_or_else(|| ChunkSums::zero(0));
-        let denominator = total.volume + self.image_volume;
+        let denominator = (total.volume - 2.0 * total.negative) + self.image_volume;
         let value = DiceValue {
             dice: 2.0 * total.overlap / denominator,
             model_volume: total.volume,

@@ -11,7 +11,7 @@ pub(super) struct ChunkSums {
     pub(super) volume: f64,
     pub(super) overlap: f64,
     pub(super) negative: f64,
-    /// `∂O/∂q` and `∂V/∂q` (empty when no gradient is wanted).
+    /// `∂O/∂q` and `∂V_abs/∂q`, `V_abs = Σ |vol_P|` (empty when no gradient is wanted).
     pub(super) grad_overlap: Vec<Vec3>,
     pub(super) grad_volume: Vec<Vec3>,
 }
@@ -60,9 +60,11 @@ impl DiceAttachment {
             sums.overlap += vol * mean_f;
             sums.negative += vol.min(0.0);
             if want_grad {
+                // ∂|vol| = sign(vol) ∂vol: a folded prism adds to the denominator.
+                let sign = if vol < 0.0 { -1.0 } else { 1.0 };
                 for j in 0..3 {
-                    vertex.add(j, s_lower, mean_f * dvol[j], dvol[j]);
-                    vertex.add(j, s_upper, mean_f * dvol[j + 3], dvol[j + 3]);
+                    vertex.add(j, s_lower, mean_f * dvol[j], sign * dvol[j]);
+                    vertex.add(j, s_upper, mean_f * dvol[j + 3], sign * dvol[j + 3]);
                     vertex.add(
                         j,
                         s_lower + self.half_layer(),
@@ -99,7 +101,7 @@ impl Default for VertexGradients {
 }
 
 impl VertexGradients {
-    /// Adds `∂O/∂x` and `∂V/∂x` at the point `x = (1 − s) b + s m` above vertex `j`.
+    /// Adds `∂O/∂x` and `∂V_abs/∂x` at the point `x = (1 − s) b + s m` above vertex `j`.
     fn add(&mut self, j: usize, s: f64, d_overlap: Vec3, d_volume: Vec3) {
         self.overlap[j][0] += (1.0 - s) * d_overlap;
         self.overlap[j][1] += s * d_overlap;
