@@ -10,14 +10,20 @@ use crate::progress::{Log, LogRow, Progress};
 use crate::stage::{self, flow_of};
 use crate::summary::{Figures, StageSummary, Status, Summary};
 use crate::time_points::{self, time_points};
+use medial_core::build::project::{project, ProjectOptions};
 use medial_core::fit::{
-    align_similarity, run_stages, similarity_between, ConstraintSet, FitEvent, Guard, PlannedStage,
-    Stage, StageOutcome,
+    affine_between, align_affine, align_similarity, anisotropy, run_stages, similarity_between,
+    ConstraintSet, FitEvent, Guard, PlannedStage, Stage, StageOutcome,
 };
 use medial_core::flow::{Flow, Trajectory};
+use medial_core::image::rasterize::{grid_around, rasterize};
+use medial_core::image::Volume;
+use medial_core::mesh::topology::{check_closed_oriented_manifold, check_outward};
+use medial_core::mesh::TriMesh;
 use medial_core::model::MedialTemplate;
 use medial_core::model::{MedialConstraints, Model};
 use medial_core::synth::{boundary_mesh, PrincipalAxes};
+use medial_core::Vec3;
 use medial_io::model::{boundary_polydata, medial_polydata};
 use medial_io::vtk;
 use nalgebra::Matrix4;
@@ -106,10 +112,11 @@ pub fn resolve(config: Option<&Path>, inputs: &Inputs, out: &Path) -> Result<Con
 }
 
 /// The automatic schedule of `--template` against the one target of `inputs`. The template is
-/// first carried by an initial similarity (which keeps it medial): by moments and overlap onto
-/// an image, by least squares onto corresponding points, none for a surface;
-/// `out/aligned_template.vtk` is the template the fit starts from, `out/alignment.txt` the
-/// similarity.
+/// first carried by an initial alignment: a similarity (which keeps it medial) by moments and
+/// overlap onto an image (or a closed surface, rasterized) or by least squares onto
+/// corresponding points, then an affine map the same way; none for an open surface. An affine map that is not a similarity
+/// is applied and the template projected back onto its constraints. `out/aligned_template.vtk`
+/// is the template the fit starts from, `out/alignment.txt` the map.
 fn automatic(inputs: &Inputs, out: &Path) -> Result<Config, CliError> {
     let template_path = inputs
         .template
@@ -118,32 +125,29 @@ fn automatic(inputs: &Inputs, out: &Path) -> Result<Config, CliError> {
     let template = medial_io::cmrep::read_template(template_path)?;
     let boundary = boundary_mesh(&template).map_err(|e| model_error(template_path, e))?;
     let axes = PrincipalAxes::of(boundary.points()).map_err(|e| model_error(template_path, e))?;
-    let plan = Geometry::of(&template, &boundary, &axes).plan();
-    let (similarity, target) = match (&inputs.image, &inputs.target, &inputs.surface) {
+    let geometry = Geometry::of(&template, &boundary, &axes);
+    let plan = geometry.plan();
+    let (alignment, target) = match (&inputs.image, &inputs.target, &inputs.surface) {
         (Some(image), None, None) => {
             let mask = medial_io::volume::read_volume(image)?.foreground(inputs.label);
-            let a = align_similarity(&boundary, &mask).map_err(|e| model_error(image, e))?;
-            tracing::info!(
-                "initial similarity: scale {:.4}, voxel Dice {:.3} → {:.3}",
-                a.scale,
-                a.voxel_dice_before,
-                a.voxel_dice
-            );
             let target = Target::Image {
                 path: image.clone(),
                 label: inputs.label,
                 voxel_mm: mask.spacing().min(),
             };
-            (a.matrix, target)
+            (align_to_image(&boundary, &mask, image)?, target)
         }
         (None, Some(points), None) => {
             let q = medial_io::mesh::read_points(points)?;
-            let similarity = similarity_between(boundary.points(), &q)
-                .map_err(|e| CliError::Input(format!("{}: {e}", points.display())))?;
-            tracing::info!("initial similarity: the least-squares similarity to the points");
-            (similarity, Target::Points(points.clone()))
+            (
+                align_to_points(&boundary, &q, points)?,
+                Target::Points(points.clone()),
+            )
         }
-        (None, None, Some(surface)) => (Matrix4::identity(), Target::Surface(surface.clone())),
+        (None, None, Some(surface)) => (
+            align_to_surface(&boundary, surface, &geometry)?,
+            Target::Surface(surface.clone()),
+        ),
         _ => {
             return Err(CliError::Input(
                 "without a config, medial fit needs --template and one of --image, --target, \
@@ -152,33 +156,146 @@ fn automatic(inputs: &Inputs, out: &Path) -> Result<Config, CliError> {
             ))
         }
     };
-    let aligned = write_aligned(&template, &similarity, out)?;
+    let aligned = write_aligned(&template, &alignment, out)?;
     Ok(plan.automatic(aligned, &target))
 }
 
-/// Carries `template` by `similarity` (which keeps it medial) and writes it as
-/// `out/aligned_template.vtk`, the similarity as `out/alignment.txt`; returns the template's
-/// absolute path.
+/// An initial map that is at most this far from a similarity ([`anisotropy`]) is taken as its
+/// similarity alone: applying and projecting would move the template by less than the
+/// projection's own tolerance can tell.
+const AFFINE_ANISOTROPY: f64 = 0.01;
+
+/// The similarity by moments and overlap, then the affine map by moments when it raises the
+/// overlap and is more than [`AFFINE_ANISOTROPY`] from a similarity.
+fn align_to_image(
+    boundary: &TriMesh,
+    mask: &Volume,
+    image: &Path,
+) -> Result<Matrix4<f64>, CliError> {
+    let s = align_similarity(boundary, mask).map_err(|e| model_error(image, e))?;
+    tracing::info!(
+        "initial similarity: scale {:.4}, voxel Dice {:.3} → {:.3}",
+        s.scale,
+        s.voxel_dice_before,
+        s.voxel_dice
+    );
+    let carried = carry_mesh(boundary, &s.matrix)?;
+    let a = align_affine(&carried, mask).map_err(|e| model_error(image, e))?;
+    if anisotropy(&a.matrix) <= AFFINE_ANISOTROPY {
+        return Ok(s.matrix);
+    }
+    tracing::info!(
+        "initial affine: anisotropy {:.1} %, voxel Dice {:.3} → {:.3}",
+        100.0 * anisotropy(&(a.matrix * s.matrix)),
+        a.voxel_dice_before,
+        a.voxel_dice
+    );
+    Ok(a.matrix * s.matrix)
+}
+
+/// The least-squares similarity to the corresponding points, or the least-squares affine map
+/// when it is more than [`AFFINE_ANISOTROPY`] from a similarity.
+fn align_to_points(
+    boundary: &TriMesh,
+    q: &[Vec3],
+    points: &Path,
+) -> Result<Matrix4<f64>, CliError> {
+    let bad = |e: medial_core::Error| CliError::Input(format!("{}: {e}", points.display()));
+    let similarity = similarity_between(boundary.points(), q).map_err(bad)?;
+    let affine = affine_between(boundary.points(), q).map_err(bad)?;
+    let rms = |m: &Matrix4<f64>| {
+        let moved = carry_points(boundary.points(), m);
+        let sum: f64 = moved
+            .iter()
+            .zip(q)
+            .map(|(a, b)| (a - b).norm_squared())
+            .sum();
+        (sum / q.len() as f64).sqrt()
+    };
+    let (rms_similarity, rms_affine) = (rms(&similarity), rms(&affine));
+    if anisotropy(&affine) <= AFFINE_ANISOTROPY {
+        tracing::info!("initial similarity: rms distance {rms_similarity:.3} mm");
+        return Ok(similarity);
+    }
+    tracing::info!(
+        "initial affine: anisotropy {:.1} %, rms distance {rms_similarity:.3} mm (similarity) → \
+         {rms_affine:.3} mm",
+        100.0 * anisotropy(&affine)
+    );
+    Ok(affine)
+}
+
+/// A closed surface is rasterized (voxels of half the template's mean spoke length, at least
+/// 1/256 of its long extent, so that the wall is a few voxels thick) and aligned to as an image;
+/// an open one gets no initial alignment.
+fn align_to_surface(
+    boundary: &TriMesh,
+    surface: &Path,
+    geometry: &Geometry,
+) -> Result<Matrix4<f64>, CliError> {
+    let mesh = medial_io::mesh::read_mesh(surface)?;
+    if let Err(defect) = check_closed_oriented_manifold(&mesh).and_then(|_| check_outward(&mesh)) {
+        tracing::info!("no initial alignment: the surface is not a closed outward mesh ({defect})");
+        return Ok(Matrix4::identity());
+    }
+    let spacing = (geometry.mean_spoke_mm / 2.0).max(geometry.long_extent_mm / 256.0);
+    let (dims, grid) =
+        grid_around(&mesh, spacing, 2.0 * spacing).map_err(|e| model_error(surface, e))?;
+    let mask = rasterize(&mesh, dims, grid).map_err(|e| model_error(surface, e))?;
+    align_to_image(boundary, &mask, surface)
+}
+
+/// `points` carried by the affine map `m`.
+fn carry_points(points: &[Vec3], m: &Matrix4<f64>) -> Vec<Vec3> {
+    points
+        .iter()
+        .map(|p| m.transform_point(&(*p).into()).coords)
+        .collect()
+}
+
+/// `mesh` carried by the affine map `m`.
+fn carry_mesh(mesh: &TriMesh, m: &Matrix4<f64>) -> Result<TriMesh, CliError> {
+    Ok(TriMesh::new(
+        carry_points(mesh.points(), m),
+        mesh.triangles().to_vec(),
+    )?)
+}
+
+/// Carries `template` by `alignment` and writes it as `out/aligned_template.vtk`, the map as
+/// `out/alignment.txt`; returns the template's absolute path. A map that is not a similarity
+/// breaks the medial constraints: the carried template is projected back onto them
+/// ([`project`]); a projection that fails is an error naming the map.
 fn write_aligned(
     template: &MedialTemplate,
-    similarity: &Matrix4<f64>,
+    alignment: &Matrix4<f64>,
     out: &Path,
 ) -> Result<PathBuf, CliError> {
     create_dir(out)?;
-    medial_io::affine::write_affine(&out.join("alignment.txt"), similarity)?;
-    let map = nalgebra::Affine3::from_matrix_unchecked(*similarity);
-    let moved: Vec<_> = template
-        .landmarks()
-        .iter()
-        .map(|p| map.transform_point(&(*p).into()).coords)
-        .collect();
+    medial_io::affine::write_affine(&out.join("alignment.txt"), alignment)?;
+    let mut carried = template.with_landmarks(&carry_points(template.landmarks(), alignment))?;
+    if anisotropy(alignment) > AFFINE_ANISOTROPY {
+        let projection = project(&carried, &ProjectOptions::default()).map_err(|e| {
+            CliError::Input(format!(
+                "the initial affine map (anisotropy {:.1} %) cannot be followed by a projection \
+                 onto the medial constraints: {e}; give a config with an SSD stage instead",
+                100.0 * anisotropy(alignment)
+            ))
+        })?;
+        tracing::info!(
+            "template projected onto its constraints after the affine map: {:.3}° / {:.3} % → \
+             {:.3}° / {:.3} %, landmarks moved ≤ {:.3} mm (rms {:.3} mm)",
+            projection.before.max_spoke_normal_deg,
+            100.0 * projection.before.max_mismatch,
+            projection.after.max_spoke_normal_deg,
+            100.0 * projection.after.max_mismatch,
+            projection.max_displacement,
+            projection.rms_displacement
+        );
+        carried = projection.template;
+    }
     let aligned =
         std::path::absolute(out.join("aligned_template.vtk")).map_err(|e| CliError::io(out, e))?;
-    medial_io::cmrep::write_template(
-        &aligned,
-        &template.with_landmarks(&moved)?,
-        write_options(false),
-    )?;
+    medial_io::cmrep::write_template(&aligned, &carried, write_options(false))?;
     Ok(aligned)
 }
 

@@ -16,6 +16,16 @@
 //! image's grid) wins. Against corresponding points, [`similarity_between`] is the least-squares
 //! similarity (Umeyama 1991). A similarity keeps a medial model medial, so the template can
 //! follow it exactly.
+//!
+//! **Affine after the similarity.** An affine map that is not a similarity does not keep a
+//! model medial (spokes stop being normal to the boundary), so it is not for the flow to follow:
+//! it is applied to the template, which is then projected back onto its constraints
+//! ([`crate::build::project()`]). [`align_affine`] finds it from moments: with the covariances
+//! `Σ_t` of the similarity-aligned template and `Σ_i` of the foreground,
+//! `A = Σ_i^{1/2} Σ_t^{-1/2}` (the symmetric map that carries one covariance onto the other;
+//! the similarity has already fixed the rotation), `t = c_i − A c_t`, kept only when it raises
+//! the voxel Dice. [`affine_between`] is the least-squares affine between corresponding
+//! points. [`anisotropy`] says how far an affine is from a similarity.
 
 use crate::image::rasterize::{grid_around, rasterize, voxel_dice};
 use crate::image::Volume;
@@ -167,6 +177,108 @@ pub fn similarity_between(p: &[Vec3], q: &[Vec3]) -> Result<Matrix4<f64>> {
     Ok(m)
 }
 
+/// The affine `p ↦ A p + t` that, after the similarity already applied to `boundary`, carries
+/// its interior's covariance onto that of `mask`'s foreground (see the module doc), with the
+/// voxel Dice before and after. When it does not raise the voxel Dice, the identity (and equal
+/// figures) is returned.
+pub fn align_affine(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> {
+    let image = Moments::of(mask)?;
+    let spacing = mask.spacing().min();
+    let (dims, grid) = grid_around(boundary, spacing, 2.0 * spacing)?;
+    let template = Moments::of(&rasterize(boundary, dims, grid)?)?;
+    let voxel_dice_before = voxel_dice(boundary, mask)?;
+    let identity = Alignment {
+        matrix: Matrix4::identity(),
+        scale: 1.0,
+        voxel_dice_before,
+        voxel_dice: voxel_dice_before,
+    };
+    let (Some(root_image), Some(inverse_root_template)) = (
+        symmetric_power(&image.covariance, 0.5),
+        symmetric_power(&template.covariance, -0.5),
+    ) else {
+        return Ok(identity);
+    };
+    let linear = root_image * inverse_root_template;
+    let mut matrix = linear.to_homogeneous();
+    let shift = image.centroid - linear * template.centroid;
+    matrix.fixed_view_mut::<3, 1>(0, 3).copy_from(&shift);
+    let moved: Vec<Vec3> = boundary
+        .points()
+        .iter()
+        .map(|p| linear * p + shift)
+        .collect();
+    let dice = voxel_dice(&TriMesh::new(moved, boundary.triangles().to_vec())?, mask)?;
+    if dice <= voxel_dice_before {
+        return Ok(identity);
+    }
+    Ok(Alignment {
+        matrix,
+        scale: linear.determinant().cbrt(),
+        voxel_dice_before,
+        voxel_dice: dice,
+    })
+}
+
+/// `S^a` of a symmetric positive definite matrix (`V diag(λ^a) Vᵀ`); none when an eigenvalue
+/// is not positive.
+fn symmetric_power(s: &Matrix3<f64>, a: f64) -> Option<Matrix3<f64>> {
+    let eigen = SymmetricEigen::new(*s);
+    if eigen
+        .eigenvalues
+        .iter()
+        .any(|&l| !(l > 0.0 && l.is_finite()))
+    {
+        return None;
+    }
+    let v = eigen.eigenvectors;
+    Some(v * Matrix3::from_diagonal(&eigen.eigenvalues.map(|l| l.powf(a))) * v.transpose())
+}
+
+/// The affine `p ↦ A p + t` minimising `Σ |A p_i + t − q_i|²` over corresponding points:
+/// with centred points, `A = (Σ q̃ p̃ᵀ)(Σ p̃ p̃ᵀ)⁻¹`, `t = q̄ − A p̄`. An error when the points
+/// `p` are (nearly) coplanar, or the map would reflect.
+pub fn affine_between(p: &[Vec3], q: &[Vec3]) -> Result<Matrix4<f64>> {
+    if p.len() != q.len() || p.len() < 4 {
+        return Err(Error::ShapeMismatch {
+            what: "corresponding points of an affine map (at least 4)".into(),
+            expected: p.len().max(4),
+            found: q.len(),
+        });
+    }
+    let n = p.len() as f64;
+    let (pc, qc) = (p.iter().sum::<Vec3>() / n, q.iter().sum::<Vec3>() / n);
+    let cross: Matrix3<f64> = p
+        .iter()
+        .zip(q)
+        .map(|(a, b)| (b - qc) * (a - pc).transpose())
+        .sum();
+    let spread: Matrix3<f64> = p.iter().map(|a| (a - pc) * (a - pc).transpose()).sum();
+    let linear = spread
+        .try_inverse()
+        .filter(|_| spread.determinant().abs() > 1e-12 * spread.norm().powi(3))
+        .map(|inverse| cross * inverse)
+        .filter(|a| a.determinant() > 0.0 && a.iter().all(|x| x.is_finite()))
+        .ok_or_else(|| {
+            Error::InvalidParameter(
+                "no orientation-preserving affine map between the points (coplanar points or a \
+                 reflection)"
+                    .into(),
+            )
+        })?;
+    let mut m = linear.to_homogeneous();
+    m.fixed_view_mut::<3, 1>(0, 3)
+        .copy_from(&(qc - linear * pc));
+    Ok(m)
+}
+
+/// How far the linear part of `m` is from a similarity: `σ_max / σ_min − 1` of its singular
+/// values (0 for a similarity, 0.1 for a 10 % stretch along one axis).
+pub fn anisotropy(m: &Matrix4<f64>) -> f64 {
+    let singular = m.fixed_view::<3, 3>(0, 0).into_owned().singular_values();
+    singular.max() / singular.min() - 1.0
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -216,6 +328,60 @@ mod tests {
             assert!((moved - b).norm() < 1e-12, "{moved} vs {b}");
         }
         assert!(similarity_between(&p[..2], &q[..2]).is_err());
+    }
+
+    #[test]
+    fn an_unequal_scaling_is_found_after_the_similarity() {
+        let target = stretched(Vec3::new(1.0, 2.0, -1.0), 1.0);
+        let stretch = Matrix3::from_diagonal(&Vec3::new(1.25, 0.9, 1.0));
+        let target = TriMesh::new(
+            target.points().iter().map(|p| stretch * p).collect(),
+            target.triangles().to_vec(),
+        )
+        .unwrap();
+        let (dims, grid) = grid_around(&target, 0.2, 2.0).unwrap();
+        let mask = rasterize(&target, dims, grid).unwrap();
+        let template = stretched(Vec3::zeros(), 1.0);
+        let s = align_similarity(&template, &mask).unwrap();
+        let carried = TriMesh::new(
+            template
+                .points()
+                .iter()
+                .map(|p| s.matrix.transform_point(&(*p).into()).coords)
+                .collect(),
+            template.triangles().to_vec(),
+        )
+        .unwrap();
+        let a = align_affine(&carried, &mask).unwrap();
+        assert!(a.voxel_dice > s.voxel_dice + 0.02, "{s:?} then {a:?}");
+        assert!(a.voxel_dice > 0.97, "{a:?}");
+        let total = a.matrix * s.matrix;
+        let expected = Vec3::new(1.25, 0.9, 1.0);
+        let found = total.fixed_view::<3, 3>(0, 0).diagonal();
+        assert!((found - expected).amax() < 0.03, "{found} vs {expected}");
+        assert!((anisotropy(&total) - 1.25 / 0.9 + 1.0).abs() < 0.05);
+        assert!(anisotropy(&s.matrix) < 1e-9);
+    }
+
+    #[test]
+    fn the_affine_between_corresponding_points_is_exact() {
+        let (p, _) = octahedron();
+        let m = Matrix4::new(
+            1.2, 0.1, 0.0, 1.0, //
+            -0.2, 0.8, 0.3, -2.0, //
+            0.0, 0.1, 1.1, 0.5, //
+            0.0, 0.0, 0.0, 1.0,
+        );
+        let q: Vec<Vec3> = p
+            .iter()
+            .map(|a| m.transform_point(&(*a).into()).coords)
+            .collect();
+        let found = affine_between(&p, &q).unwrap();
+        assert!((found - m).amax() < 1e-12, "{found}");
+        let flat: Vec<Vec3> = p.iter().map(|a| Vec3::new(a.x, a.y, 0.0)).collect();
+        assert!(affine_between(&flat, &q).is_err());
+        let mirrored: Vec<Vec3> = p.iter().map(|a| Vec3::new(-a.x, a.y, a.z)).collect();
+        assert!(affine_between(&p, &mirrored).is_err());
     }
 
     #[test]

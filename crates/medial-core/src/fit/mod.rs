@@ -1,7 +1,7 @@
 //! Fitting: the objective of one stage and its exact gradient ([`objective`]), its minimisation
 //! with L-BFGS ([`optimize`]) with every iterate checked for soundness ([`guard`]), the
 //! augmented-Lagrangian schedule of a stage ([`augmented_lagrangian`]), and a whole fit of
-//! several stages in a row ([`stages`]); and an initial similarity alignment to an image
+//! several stages in a row ([`stages`]); and the initial alignment, a similarity then an affine map
 //! ([`align`]).
 
 pub mod align;
@@ -11,7 +11,9 @@ pub mod objective;
 pub mod optimize;
 pub mod stages;
 
-pub use align::{align_similarity, similarity_between, Alignment};
+pub use align::{
+    affine_between, align_affine, align_similarity, anisotropy, similarity_between, Alignment,
+};
 pub use augmented_lagrangian::{
     run_stage, AlSchedule, MuUpdate, Progress, Stage, StageOutcome, UnsoundStop,
 };
