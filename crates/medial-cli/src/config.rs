@@ -117,6 +117,16 @@ pub enum ConstraintUnitsConfig {
     Relative,
 }
 
+/// The coordinates of a plain matrix file (see `medial_io::affine::Convention`).
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum TransformConventionConfig {
+    /// RAS+ (NIfTI, greedy).
+    Ras,
+    /// LPS+ (ITK, ANTs).
+    Lps,
+}
+
 /// The kind of a varifold stage's surface distance (see
 /// `medial_core::attachment::varifold::Kind`).
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
@@ -142,10 +152,19 @@ pub struct StageConfig {
     /// SSD: a mesh with the same points, in the same order, as the template boundary.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub target: Option<PathBuf>,
-    /// SSD: a 4×4 affine matrix (text, row by row); the targets are the template's boundary
-    /// points moved by it.
+    /// SSD: a 4×4 affine matrix (text, row by row, RAS mm, about the origin, template →
+    /// subject) or an ITK transform file (LPS); the targets are the template's boundary points
+    /// moved by it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub transform: Option<PathBuf>,
+    /// SSD with `transform`: the coordinates of a plain matrix file, `"ras"` (default; NIfTI,
+    /// greedy) or `"lps"` (ITK, ANTs). ITK transform files are always read as LPS.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub transform_convention: Option<TransformConventionConfig>,
+    /// SSD with `transform`: the file maps subject → template (ITK's and greedy's fixed →
+    /// moving, with the template registered as the moving image): invert it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub transform_invert: Option<bool>,
     /// Dice: a binary (or labelled) image.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub image: Option<PathBuf>,
@@ -269,6 +288,8 @@ impl StageConfig {
             attachment,
             target: None,
             transform: None,
+            transform_convention: None,
+            transform_invert: None,
             image: None,
             surface: None,
             varifold_kind: VarifoldKindConfig::default(),
@@ -399,6 +420,16 @@ impl StageConfig {
                 "{key} does not apply to attachment = \"{}\"",
                 self.attachment.name()
             ));
+        }
+        let transform_keys = [
+            ("transform_convention", self.transform_convention.is_some()),
+            ("transform_invert", self.transform_invert.is_some()),
+        ];
+        if let Some((key, _)) = transform_keys
+            .iter()
+            .find(|(_, given)| *given && self.transform.is_none())
+        {
+            return Err(format!("{key} needs transform"));
         }
         match self.attachment {
             AttachmentKind::Ssd => match (&self.target, &self.transform) {

@@ -3,7 +3,8 @@
 //! reported for a configuration of the model's landmarks.
 
 use crate::config::{
-    AttachmentKind, Config, ConstraintUnitsConfig, MuUpdateConfig, StageConfig, VarifoldKindConfig,
+    AttachmentKind, Config, ConstraintUnitsConfig, MuUpdateConfig, StageConfig,
+    TransformConventionConfig, VarifoldKindConfig,
 };
 use crate::error::CliError;
 use crate::memory::Estimate;
@@ -22,6 +23,7 @@ use medial_core::mesh::Bounds;
 use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
 use medial_core::model::Model;
 use medial_core::{TriMesh, Vec3};
+use medial_io::affine::Convention;
 
 /// The flow of a config for `landmarks` points; refuses a flow whose fit would pass the memory
 /// limit ([`Estimate::flow`]).
@@ -169,8 +171,12 @@ fn constraints(
 fn ssd_targets(stage: &StageConfig, model: &Model) -> Result<Vec<Vec3>, CliError> {
     let nb = model.boundary_count();
     if let Some(path) = &stage.transform {
-        let m = medial_io::affine::read_affine(path)?;
-        let determinant = m.matrix().fixed_view::<3, 3>(0, 0).determinant();
+        let convention = match stage.transform_convention {
+            Some(TransformConventionConfig::Lps) => Convention::Lps,
+            Some(TransformConventionConfig::Ras) | None => Convention::Ras,
+        };
+        let read = medial_io::affine::read_affine_as(path, convention)?;
+        let determinant = read.matrix().fixed_view::<3, 3>(0, 0).determinant();
         if !(determinant.is_finite() && determinant > 0.0) {
             return Err(CliError::Transform {
                 stage: stage.name.clone(),
@@ -178,6 +184,10 @@ fn ssd_targets(stage: &StageConfig, model: &Model) -> Result<Vec<Vec3>, CliError
                 determinant,
             });
         }
+        let m = match stage.transform_invert {
+            Some(true) => read.inverse(),
+            _ => read,
+        };
         return Ok(model.landmarks()[..nb]
             .iter()
             .map(|p| m.transform_point(&(*p).into()).coords)
