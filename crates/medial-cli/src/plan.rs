@@ -277,17 +277,9 @@ impl Geometry {
             (0..template.boundary_count())
                 .map(|b| (q[b] - q[template.atom_landmark(atoms[b])]).norm()),
         );
-        let p = boundary.points();
-        let mean_edge_mm = mean(
-            boundary
-                .triangles()
-                .iter()
-                .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
-                .map(|(a, b)| (p[a] - p[b]).norm()),
-        );
         let mut g = Self {
             mean_spoke_mm,
-            mean_edge_mm,
+            mean_edge_mm: mean_edge(boundary),
             long_extent_mm: axes.extent.z,
             sigma_mm: 0.0,
         };
@@ -318,6 +310,65 @@ impl Geometry {
             dice_iterations: 300,
         }
     }
+}
+
+/// Mean length of the edges of `mesh`'s triangles (each counted once per triangle), mm.
+fn mean_edge(mesh: &TriMesh) -> f64 {
+    let p = mesh.points();
+    mean(
+        mesh.triangles()
+            .iter()
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+            .map(|(a, b)| (p[a] - p[b]).norm()),
+    )
+}
+
+/// The kernel width of a plain mesh (no spokes to set it): an eighth of its long principal
+/// extent (the bound of [`Geometry::sigma`]; 5.5 mm for the KeOps hippocampus, whose shipped
+/// config uses 5), at least half its mean edge, mm.
+pub fn plain_sigma(mesh: &TriMesh, axes: &PrincipalAxes) -> f64 {
+    (axes.extent.z / 8.0).max(mean_edge(mesh) / 2.0)
+}
+
+/// The kinetic weight of a plain mesh's automatic fit: the shipped hippocampus config's. With
+/// no constraints to hold the wall, the kinetic energy is what keeps the flow smooth; at the
+/// medial templates' 0.005 a varifold fit of the reduced KeOps hippocampus folds a triangle
+/// (reported unsound at iteration 14).
+const PLAIN_KINETIC_WEIGHT: f64 = 0.05;
+
+/// L-BFGS iterations of the one unconstrained stage of an automatic fit of a plain mesh.
+const PLAIN_ITERATIONS: usize = 300;
+
+/// The automatic fit of a plain mesh `template` (no medial constraints) against `target`,
+/// points (SSD) or a surface (varifold): one stage of [`PLAIN_ITERATIONS`], N =
+/// [`AUTOMATIC`]'s time steps, kernel width `sigma`, w_kin [`PLAIN_KINETIC_WEIGHT`]. None for
+/// an image: the Dice term needs a medial template's interior.
+pub fn automatic_plain(template: PathBuf, target: &Target, sigma: f64) -> Option<Config> {
+    let mut stage = match target {
+        Target::Image { .. } => return None,
+        Target::Points(path) => {
+            let mut points = StageConfig::new("boundary", AttachmentKind::Ssd);
+            points.target = Some(path.clone());
+            points
+        }
+        Target::Surface(path) => {
+            let mut surface = StageConfig::new("surface", AttachmentKind::Varifold);
+            surface.surface = Some(path.clone());
+            surface
+        }
+    };
+    stage.constraints = Some(false);
+    stage.max_iterations = PLAIN_ITERATIONS;
+    Some(Config {
+        model: ModelConfig { template },
+        flow: FlowConfig {
+            sigma: (sigma * 100.0).round() / 100.0,
+            time_steps: AUTOMATIC.time_steps,
+            kinetic_weight: PLAIN_KINETIC_WEIGHT,
+        },
+        output: OutputConfig::default(),
+        stages: vec![stage],
+    })
 }
 
 fn mean(values: impl Iterator<Item = f64>) -> f64 {

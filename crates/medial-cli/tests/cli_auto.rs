@@ -160,3 +160,72 @@ fn an_unequal_scaling_is_applied_and_projected_before_the_flow() {
     assert!(f(&last["max_spoke_normal_deg"]) <= 0.5, "{last}");
     assert!(f(&last["max_spoke_mismatch_pct"]) <= 0.5, "{last}");
 }
+
+/// A plain mesh (no medial structure) fits without a config too: the initial map applied
+/// whole, then one unconstrained stage; an image is refused (Dice needs a medial interior).
+/// The template is t001's boundary bent by `medial synth --from` (a plain mesh), the target
+/// the same boundary under the affine part alone.
+#[test]
+fn a_plain_mesh_fits_without_a_config() {
+    let dir = tempfile::tempdir().unwrap();
+    let examples = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples");
+    let case = dir.path().join("case");
+    let o = medial(&[
+        "synth",
+        "--from",
+        s(&examples.join("t001/template.vtk")),
+        "--bend",
+        "0",
+        "--twist",
+        "0",
+        "--out",
+        s(&case),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let source = examples.join("t001-bent/target_boundary.vtk");
+    let out = dir.path().join("fit");
+    let o = medial(&[
+        "fit",
+        "--template",
+        s(&source),
+        "--target",
+        s(&case.join("target_boundary.vtk")),
+        "--out",
+        s(&out),
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let summary = read_summary(&out);
+    let stage = &summary["stages"][0];
+    println!("plain mesh: {summary:#}");
+    assert_eq!(stage["constraints_met"], Value::Null, "{stage}");
+    assert_eq!(summary["medial_atoms"], 0, "{summary}");
+    // The SSD data term (squared distances) at the aligned start and at the end.
+    let first = f(&first_logged(&out, "data"));
+    let last = f(&summary["final"]["data"]);
+    assert!(last < first / 10.0, "{first} → {last}");
+    assert!(f(&summary["final"]["mean_distance"]) < 0.1, "{summary}");
+    common::one_line_error(
+        &[
+            "fit",
+            "--template",
+            s(&source),
+            "--image",
+            s(&examples.join("toy/target.nii.gz")),
+            "--out",
+            s(&dir.path().join("dice")),
+        ],
+        1,
+        &["is a plain mesh: a Dice fit needs a medial template"],
+    );
+}
+
+/// The column `name` of the first row of the fit's log (the aligned start).
+fn first_logged(out: &Path, name: &str) -> Value {
+    let log = std::fs::read_to_string(out.join("log.csv")).unwrap();
+    let mut lines = log.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let row: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let column = header.iter().position(|h| *h == name).unwrap();
+    Value::from(row[column].parse::<f64>().unwrap())
+}

@@ -5,7 +5,7 @@ use crate::config::{AttachmentKind, Config};
 use crate::error::CliError;
 use crate::output::model_error;
 use crate::output::{write_json, write_options, write_text};
-use crate::plan::{Geometry, Target};
+use crate::plan::{plain_sigma, Geometry, Target};
 use crate::progress::{Log, LogRow, Progress};
 use crate::stage::{self, flow_of};
 use crate::summary::{Figures, StageSummary, Status, Summary};
@@ -122,12 +122,20 @@ fn automatic(inputs: &Inputs, out: &Path) -> Result<Config, CliError> {
         .template
         .as_ref()
         .expect("clap requires --template without a config");
-    let template = medial_io::cmrep::read_template(template_path)?;
-    let boundary = boundary_mesh(&template).map_err(|e| model_error(template_path, e))?;
-    let axes = PrincipalAxes::of(boundary.points()).map_err(|e| model_error(template_path, e))?;
-    let geometry = Geometry::of(&template, &boundary, &axes);
-    let plan = geometry.plan();
-    let (alignment, target) = match (&inputs.image, &inputs.target, &inputs.surface) {
+    match medial_io::model::read_model(template_path)? {
+        Model::Medial(template) => automatic_medial(&template, template_path, inputs, out),
+        Model::Plain(mesh) => automatic_plain(&mesh, template_path, inputs, out),
+    }
+}
+
+/// The one target of an automatic fit, and its initial map of the template's boundary
+/// `boundary` (see [`automatic`]); `spacing` rasterizes a closed surface.
+fn target_and_alignment(
+    boundary: &TriMesh,
+    inputs: &Inputs,
+    spacing: f64,
+) -> Result<(Matrix4<f64>, Target), CliError> {
+    match (&inputs.image, &inputs.target, &inputs.surface) {
         (Some(image), None, None) => {
             let mask = medial_io::volume::read_volume(image)?.foreground(inputs.label);
             let target = Target::Image {
@@ -135,29 +143,75 @@ fn automatic(inputs: &Inputs, out: &Path) -> Result<Config, CliError> {
                 label: inputs.label,
                 voxel_mm: mask.spacing().min(),
             };
-            (align_to_image(&boundary, &mask, image)?, target)
+            Ok((align_to_image(boundary, &mask, image)?, target))
         }
         (None, Some(points), None) => {
             let q = medial_io::mesh::read_points(points)?;
-            (
-                align_to_points(&boundary, &q, points)?,
+            Ok((
+                align_to_points(boundary, &q, points)?,
                 Target::Points(points.clone()),
-            )
-        }
-        (None, None, Some(surface)) => (
-            align_to_surface(&boundary, surface, &geometry)?,
-            Target::Surface(surface.clone()),
-        ),
-        _ => {
-            return Err(CliError::Input(
-                "without a config, medial fit needs --template and one of --image, --target, \
-                 --surface"
-                    .into(),
             ))
         }
+        (None, None, Some(surface)) => Ok((
+            align_to_surface(boundary, surface, spacing)?,
+            Target::Surface(surface.clone()),
+        )),
+        _ => Err(CliError::Input(
+            "without a config, medial fit needs --template and one of --image, --target, \
+             --surface"
+                .into(),
+        )),
+    }
+}
+
+/// [`automatic`] for a medial template.
+fn automatic_medial(
+    template: &MedialTemplate,
+    template_path: &Path,
+    inputs: &Inputs,
+    out: &Path,
+) -> Result<Config, CliError> {
+    let boundary = boundary_mesh(template).map_err(|e| model_error(template_path, e))?;
+    let axes = PrincipalAxes::of(boundary.points()).map_err(|e| model_error(template_path, e))?;
+    let geometry = Geometry::of(template, &boundary, &axes);
+    // Voxels of half the mean spoke, so that the wall is a few voxels thick.
+    let spacing = (geometry.mean_spoke_mm / 2.0).max(geometry.long_extent_mm / 256.0);
+    let (alignment, target) = target_and_alignment(&boundary, inputs, spacing)?;
+    let aligned = write_aligned(template, &alignment, out)?;
+    Ok(geometry.plan().automatic(aligned, &target))
+}
+
+/// [`automatic`] for a plain mesh: the whole initial map is applied (there are no constraints
+/// to keep), then one unconstrained stage ([`crate::plan::automatic_plain`]).
+fn automatic_plain(
+    mesh: &TriMesh,
+    template_path: &Path,
+    inputs: &Inputs,
+    out: &Path,
+) -> Result<Config, CliError> {
+    let dice_refused = || {
+        CliError::Input(format!(
+            "{} is a plain mesh: a Dice fit needs a medial template (a MedialIndex point \
+             array); fit a plain mesh with --target or --surface",
+            template_path.display()
+        ))
     };
-    let aligned = write_aligned(&template, &alignment, out)?;
-    Ok(plan.automatic(aligned, &target))
+    if inputs.image.is_some() {
+        return Err(dice_refused());
+    }
+    let axes = PrincipalAxes::of(mesh.points()).map_err(|e| model_error(template_path, e))?;
+    let sigma = plain_sigma(mesh, &axes);
+    let (alignment, target) = target_and_alignment(mesh, inputs, axes.extent.z / 128.0)?;
+    create_dir(out)?;
+    medial_io::affine::write_affine(&out.join("alignment.txt"), &alignment)?;
+    let aligned =
+        std::path::absolute(out.join("aligned_template.vtk")).map_err(|e| CliError::io(out, e))?;
+    vtk::write_trimesh(
+        &aligned,
+        &carry_mesh(mesh, &alignment)?,
+        write_options(false),
+    )?;
+    crate::plan::automatic_plain(aligned, &target, sigma).ok_or_else(dice_refused)
 }
 
 /// An initial map that is at most this far from a similarity ([`anisotropy`]) is taken as its
@@ -194,7 +248,8 @@ fn align_to_image(
 }
 
 /// The least-squares similarity to the corresponding points, or the least-squares affine map
-/// when it is more than [`AFFINE_ANISOTROPY`] from a similarity.
+/// when it is more than [`AFFINE_ANISOTROPY`] from a similarity (and preserves orientation:
+/// points that correspond poorly can call for a reflection).
 fn align_to_points(
     boundary: &TriMesh,
     q: &[Vec3],
@@ -202,7 +257,13 @@ fn align_to_points(
 ) -> Result<Matrix4<f64>, CliError> {
     let bad = |e: medial_core::Error| CliError::Input(format!("{}: {e}", points.display()));
     let similarity = similarity_between(boundary.points(), q).map_err(bad)?;
-    let affine = affine_between(boundary.points(), q).map_err(bad)?;
+    let affine = match affine_between(boundary.points(), q) {
+        Ok(affine) => affine,
+        Err(e) => {
+            tracing::warn!("no initial affine map, the similarity alone: {e}");
+            similarity
+        }
+    };
     let rms = |m: &Matrix4<f64>| {
         let moved = carry_points(boundary.points(), m);
         let sum: f64 = moved
@@ -225,20 +286,18 @@ fn align_to_points(
     Ok(affine)
 }
 
-/// A closed surface is rasterized (voxels of half the template's mean spoke length, at least
-/// 1/256 of its long extent, so that the wall is a few voxels thick) and aligned to as an image;
-/// an open one gets no initial alignment.
+/// A closed surface is rasterized with voxels of `spacing` mm and aligned to as an image; an
+/// open one gets no initial alignment.
 fn align_to_surface(
     boundary: &TriMesh,
     surface: &Path,
-    geometry: &Geometry,
+    spacing: f64,
 ) -> Result<Matrix4<f64>, CliError> {
     let mesh = medial_io::mesh::read_mesh(surface)?;
     if let Err(defect) = check_closed_oriented_manifold(&mesh).and_then(|_| check_outward(&mesh)) {
         tracing::info!("no initial alignment: the surface is not a closed outward mesh ({defect})");
         return Ok(Matrix4::identity());
     }
-    let spacing = (geometry.mean_spoke_mm / 2.0).max(geometry.long_extent_mm / 256.0);
     let (dims, grid) =
         grid_around(&mesh, spacing, 2.0 * spacing).map_err(|e| model_error(surface, e))?;
     let mask = rasterize(&mesh, dims, grid).map_err(|e| model_error(surface, e))?;
