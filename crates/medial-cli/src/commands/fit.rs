@@ -10,7 +10,7 @@ use crate::progress::{Log, LogRow, Progress};
 use crate::stage::{self, flow_of};
 use crate::summary::{Figures, StageSummary, Status, Summary};
 use crate::time_points::{self, time_points};
-use medial_core::build::project::{project, ProjectOptions};
+use medial_core::build::project::{project, ConstraintFigures, ProjectOptions};
 use medial_core::fit::{
     affine_between, align_affine, align_similarity, anisotropy, run_stages, similarity_between,
     ConstraintSet, FitEvent, Guard, PlannedStage, Stage, StageOutcome,
@@ -323,7 +323,9 @@ fn carry_mesh(mesh: &TriMesh, m: &Matrix4<f64>) -> Result<TriMesh, CliError> {
 /// Carries `template` by `alignment` and writes it as `out/aligned_template.vtk`, the map as
 /// `out/alignment.txt`; returns the template's absolute path. A map that is not a similarity
 /// breaks the medial constraints: the carried template is projected back onto them
-/// ([`project`]); a projection that fails is an error naming the map.
+/// ([`project`]); a projection that fails is an error naming the map. A template that is not
+/// medial as given (an inflated sheet before its projection) is projected too, with a warning
+/// when that fails.
 fn write_aligned(
     template: &MedialTemplate,
     alignment: &Matrix4<f64>,
@@ -332,25 +334,44 @@ fn write_aligned(
     create_dir(out)?;
     medial_io::affine::write_affine(&out.join("alignment.txt"), alignment)?;
     let mut carried = template.with_landmarks(&carry_points(template.landmarks(), alignment))?;
-    if anisotropy(alignment) > AFFINE_ANISOTROPY {
-        let projection = project(&carried, &ProjectOptions::default()).map_err(|e| {
-            CliError::Input(format!(
-                "the initial affine map (anisotropy {:.1} %) cannot be followed by a projection \
-                 onto the medial constraints: {e}; give a config with an SSD stage instead",
-                100.0 * anisotropy(alignment)
-            ))
-        })?;
-        tracing::info!(
-            "template projected onto its constraints after the affine map: {:.3}° / {:.3} % → \
-             {:.3}° / {:.3} %, landmarks moved ≤ {:.3} mm (rms {:.3} mm)",
-            projection.before.max_spoke_normal_deg,
-            100.0 * projection.before.max_mismatch,
-            projection.after.max_spoke_normal_deg,
-            100.0 * projection.after.max_mismatch,
-            projection.max_displacement,
-            projection.rms_displacement
-        );
-        carried = projection.template;
+    let options = ProjectOptions::default();
+    let affine = anisotropy(alignment) > AFFINE_ANISOTROPY;
+    let medial = ConstraintFigures::of(
+        &carried,
+        &MedialConstraints::new(&carried),
+        carried.landmarks(),
+    )
+    .meets(&options);
+    if affine || !medial {
+        let why = if affine {
+            "after the affine map"
+        } else {
+            "as given"
+        };
+        match project(&carried, &options) {
+            Ok(projection) => {
+                tracing::info!(
+                    "template projected onto its constraints {why}: {:.3}° / {:.3} % → {:.3}° / \
+                     {:.3} %, landmarks moved ≤ {:.3} mm (rms {:.3} mm)",
+                    projection.before.max_spoke_normal_deg,
+                    100.0 * projection.before.max_mismatch,
+                    projection.after.max_spoke_normal_deg,
+                    100.0 * projection.after.max_mismatch,
+                    projection.max_displacement,
+                    projection.rms_displacement
+                );
+                carried = projection.template;
+            }
+            Err(e) if affine => {
+                return Err(CliError::Input(format!(
+                    "the initial affine map (anisotropy {:.1} %) cannot be followed by a \
+                     projection onto the medial constraints: {e}; give a config with an SSD \
+                     stage instead",
+                    100.0 * anisotropy(alignment)
+                )))
+            }
+            Err(e) => tracing::warn!("the template is not medial and its projection failed: {e}"),
+        }
     }
     let aligned =
         std::path::absolute(out.join("aligned_template.vtk")).map_err(|e| CliError::io(out, e))?;

@@ -13,7 +13,7 @@
 //! - `t = c_img − s R c_tmpl`,
 //!
 //! and the candidate whose moved boundary overlaps the foreground best (voxel Dice on the
-//! image's grid) wins. Against corresponding points, [`similarity_between`] is the least-squares
+//! image's grid) wins; no move at all is a candidate too. Against corresponding points, [`similarity_between`] is the least-squares
 //! similarity (Umeyama 1991). A similarity keeps a medial model medial, so the template can
 //! follow it exactly.
 //!
@@ -117,7 +117,8 @@ pub fn align_similarity(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> 
             .map(|d| e_img * Matrix3::from_diagonal(&Vec3::from(*d)) * e_tmpl.transpose()),
     );
     let voxel_dice_before = voxel_dice(boundary, mask)?;
-    let mut best: Option<(Matrix4<f64>, f64)> = None;
+    // No move at all is a candidate too: moments can mislead on a thin or partial shape.
+    let mut best = (Matrix4::identity(), voxel_dice_before);
     for r in rotations {
         let linear = r * scale;
         let mut matrix = linear.to_homogeneous();
@@ -129,14 +130,14 @@ pub fn align_similarity(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> 
             .map(|p| linear * p + shift)
             .collect();
         let dice = voxel_dice(&TriMesh::new(moved, boundary.triangles().to_vec())?, mask)?;
-        if best.map_or(true, |(_, d)| dice > d) {
-            best = Some((matrix, dice));
+        if dice > best.1 {
+            best = (matrix, dice);
         }
     }
-    let (matrix, voxel_dice) = best.expect("the identity is a candidate");
+    let (matrix, voxel_dice) = best;
     Ok(Alignment {
         matrix,
-        scale,
+        scale: matrix.fixed_view::<3, 3>(0, 0).determinant().cbrt(),
         voxel_dice_before,
         voxel_dice,
     })
