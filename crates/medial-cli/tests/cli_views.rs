@@ -145,7 +145,10 @@ fn vtk_sees_every_point_array() {
         let printed = text(&o.stdout);
         let mut lines = printed.lines();
         let seen: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
-        assert_eq!(seen, ours, "{file}: VTK reads other arrays than medial wrote");
+        assert_eq!(
+            seen, ours,
+            "{file}: VTK reads other arrays than medial wrote"
+        );
         // cmrep reads a template's normals as the point data's normals.
         assert_eq!(lines.next().unwrap_or_default(), normals, "{file}");
     }
@@ -167,15 +170,30 @@ v.validateBytes(bytes, { maxIssues: 50 }).then(
 fn flow_glb_passes_the_gltf_validator() {
     let glb = fitted().join("flow.glb");
     let gltf = gltf::Gltf::open(&glb).expect("flow.glb reads");
-    let names: Vec<&str> = gltf.default_scene().unwrap().nodes().filter_map(|n| n.name()).collect();
+    let names: Vec<&str> = gltf
+        .default_scene()
+        .unwrap()
+        .nodes()
+        .filter_map(|n| n.name())
+        .collect();
     assert_eq!(names, ["boundary", "medial"]);
     assert_eq!(gltf.animations().count(), 1);
     let Some(issues) = validate_gltf(&glb) else {
-        tool(false, "node with the npm package gltf-validator (NODE_PATH)");
+        tool(
+            false,
+            "node with the npm package gltf-validator (NODE_PATH)",
+        );
         return;
     };
     assert_eq!(issues["numErrors"], 0, "{issues}");
     assert_eq!(issues["numWarnings"], 0, "{issues}");
+    // The check can fail: a file cut short is reported.
+    let dir = tempfile::tempdir().unwrap();
+    let cut = dir.path().join("cut.glb");
+    let bytes = std::fs::read(&glb).unwrap();
+    std::fs::write(&cut, &bytes[..bytes.len() - 8]).unwrap();
+    let issues = validate_gltf(&cut).unwrap();
+    assert!(issues["numErrors"].as_u64() > Some(0), "{issues}");
 }
 
 /// Renders `page` in headless Chromium into `png`; the lines Chromium logged for the page's
@@ -205,18 +223,28 @@ fn render(page: &Path, png: &Path, profile: &Path) -> Option<Vec<String>> {
         .expect("chromium runs");
     assert!(png.is_file(), "no screenshot: {}", text(&o.stderr));
     let log = text(&o.stderr);
-    Some(log.lines().filter(|l| l.contains(":CONSOLE")).map(str::to_owned).collect())
+    Some(
+        log.lines()
+            .filter(|l| l.contains(":CONSOLE"))
+            .map(str::to_owned)
+            .collect(),
+    )
 }
 
 /// The share of pixels of a PNG that are not white, and the number of distinct colours.
 fn ink(png: &Path) -> (f64, usize) {
     let bytes = std::fs::read(png).unwrap();
-    let mut reader = png::Decoder::new(std::io::Cursor::new(bytes)).read_info().unwrap();
+    let mut reader = png::Decoder::new(std::io::Cursor::new(bytes))
+        .read_info()
+        .unwrap();
     let mut buf = vec![0; reader.output_buffer_size().unwrap()];
     let info = reader.next_frame(&mut buf).unwrap();
     let channels = info.color_type.samples();
     let pixels: Vec<&[u8]> = buf[..info.buffer_size()].chunks(channels).collect();
-    let inked = pixels.iter().filter(|p| p[..3].iter().any(|&c| c < 235)).count();
+    let inked = pixels
+        .iter()
+        .filter(|p| p[..3].iter().any(|&c| c < 235))
+        .count();
     let mut colours: Vec<&[u8]> = pixels.clone();
     colours.sort_unstable();
     colours.dedup();
@@ -258,12 +286,18 @@ fn report_renders_in_chromium_without_console_messages() {
     };
     assert!(console.is_empty(), "the page logged: {console:?}");
     let (inked, colours) = ink(&png);
-    assert!(inked > 0.03 && colours > 50, "blank screenshot: {inked} inked, {colours} colours");
+    assert!(
+        inked > 0.03 && colours > 50,
+        "blank screenshot: {inked} inked, {colours} colours"
+    );
     // The console check can fail: a page with an error is caught.
     let bad = dir.path().join("bad.html");
     std::fs::write(&bad, "<p>x</p><script>undefinedFunction()</script>").unwrap();
     let console = render(&bad, &dir.path().join("bad.png"), &dir.path().join("p2")).unwrap();
-    assert!(console.iter().any(|l| l.contains("undefinedFunction")), "{console:?}");
+    assert!(
+        console.iter().any(|l| l.contains("undefinedFunction")),
+        "{console:?}"
+    );
 }
 
 #[test]
@@ -272,14 +306,22 @@ fn report_command_writes_the_views_again_and_shows_extra_columns() {
     // A folder of the same name: the report names its folder.
     let copy = dir.path().join("toy");
     std::fs::create_dir_all(copy.join("flow")).unwrap();
-    for entry in std::fs::read_dir(fitted()).unwrap().chain(std::fs::read_dir(fitted().join("flow")).unwrap()) {
+    for entry in std::fs::read_dir(fitted())
+        .unwrap()
+        .chain(std::fs::read_dir(fitted().join("flow")).unwrap())
+    {
         let path = entry.unwrap().path();
         let relative = path.strip_prefix(fitted()).unwrap();
         if path.is_file() {
             std::fs::copy(&path, copy.join(relative)).unwrap();
         }
     }
-    let views = ["report.html", "flow.glb", "flow/boundary.vtk.series", "flow/medial.vtk.series"];
+    let views = [
+        "report.html",
+        "flow.glb",
+        "flow/boundary.vtk.series",
+        "flow/medial.vtk.series",
+    ];
     for view in views {
         std::fs::remove_file(copy.join(view)).unwrap();
     }
@@ -304,7 +346,10 @@ fn report_command_writes_the_views_again_and_shows_extra_columns() {
     let o = medial(&["report", s(&copy)]);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let html = std::fs::read_to_string(copy.join("report.html")).unwrap();
-    assert!(html.contains("mean ball residual"), "the extra column is not shown");
+    assert!(
+        html.contains("mean ball residual"),
+        "the extra column is not shown"
+    );
     assert!(html.contains("<th>mean_ball_residual</th>"));
 }
 
@@ -313,6 +358,10 @@ fn report_of_a_folder_that_is_not_a_fit_is_one_line_error() {
     let dir = tempfile::tempdir().unwrap();
     let line = one_line_error(&["report", s(dir.path())], 1, &["summary.json"]);
     assert!(line.contains("summary.json"), "{line}");
-    std::fs::write(dir.path().join("summary.json"), "{\"status\": \"converged\"}").unwrap();
+    std::fs::write(
+        dir.path().join("summary.json"),
+        "{\"status\": \"converged\"}",
+    )
+    .unwrap();
     one_line_error(&["report", s(dir.path())], 1, &["time_steps", "fit folder"]);
 }

@@ -89,19 +89,22 @@ pub fn glb_bytes(animation: &FlowAnimation) -> std::result::Result<Vec<u8>, Stri
     let mut roots = Vec::new();
     for surface in &animation.surfaces {
         let frames = doc.surface(surface, animation);
-        channels.extend(frames.iter().enumerate().map(|(n, &node)| {
-            json::animation::Channel {
-                sampler: Index::new(n as u32),
-                target: json::animation::Target {
+        channels.extend(
+            frames
+                .iter()
+                .enumerate()
+                .map(|(n, &node)| json::animation::Channel {
+                    sampler: Index::new(n as u32),
+                    target: json::animation::Target {
+                        extensions: None,
+                        extras: Default::default(),
+                        node,
+                        path: Valid(json::animation::Property::Scale),
+                    },
                     extensions: None,
                     extras: Default::default(),
-                    node,
-                    path: Valid(json::animation::Property::Scale),
-                },
-                extensions: None,
-                extras: Default::default(),
-            }
-        }));
+                }),
+        );
         roots.push(doc.root.push(json::Node {
             name: Some(surface.name.clone()),
             children: Some(frames),
@@ -165,19 +168,20 @@ fn check_surface(s: &AnimatedSurface, frames: usize) -> std::result::Result<(), 
         ));
     }
     let n = s.frames[0].len();
-    if let Some(k) = (0..frames).find(|&k| {
-        s.frames[k].len() != n || s.values.get(k).is_some_and(|v| v.len() != n)
-    }) {
+    if let Some(k) = (0..frames)
+        .find(|&k| s.frames[k].len() != n || s.values.get(k).is_some_and(|v| v.len() != n))
+    {
         return Err(format!(
             "frame {k} has another number of vertices or values than frame 0 ({n})"
         ));
     }
     if let Some(t) = s.triangles.iter().find(|t| t.iter().any(|&v| v >= n)) {
-        return Err(format!("triangle {t:?} names a vertex beyond the {n} vertices"));
+        return Err(format!(
+            "triangle {t:?} names a vertex beyond the {n} vertices"
+        ));
     }
     let finite = |p: &Vec3| p.iter().all(|c| c.is_finite());
-    if !s.frames.iter().flatten().all(finite) || !s.values.iter().flatten().all(|v| v.is_finite())
-    {
+    if !s.frames.iter().flatten().all(finite) || !s.values.iter().flatten().all(|v| v.is_finite()) {
         return Err("a coordinate or value is not finite".into());
     }
     if !(s.opacity > 0.0 && s.opacity <= 1.0) {
@@ -216,7 +220,11 @@ struct Document {
 
 impl Document {
     /// Appends `bytes` as a new buffer view (4-byte aligned).
-    fn view(&mut self, bytes: &[u8], target: Option<json::buffer::Target>) -> Index<json::buffer::View> {
+    fn view(
+        &mut self,
+        bytes: &[u8],
+        target: Option<json::buffer::Target>,
+    ) -> Index<json::buffer::View> {
         let offset = self.bin.len();
         self.bin.extend_from_slice(bytes);
         self.bin.resize(self.bin.len().next_multiple_of(4), 0);

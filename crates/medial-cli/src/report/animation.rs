@@ -72,7 +72,12 @@ pub fn flow_animation(folder: &FitFolder) -> Result<Option<FlowAnimation>, CliEr
         (Some(thickness), Some(atoms)) => thickness
             .iter()
             .zip(atoms)
-            .map(|(t, atoms)| atoms.iter().map(|&a| t.get(a as usize).copied().unwrap_or(f64::NAN)).collect())
+            .map(|(t, atoms)| {
+                atoms
+                    .iter()
+                    .map(|&a| t.get(a as usize).copied().unwrap_or(f64::NAN))
+                    .collect()
+            })
             .collect(),
         _ => Vec::new(),
     };
@@ -96,7 +101,12 @@ pub fn flow_animation(folder: &FitFolder) -> Result<Option<FlowAnimation>, CliEr
             opacity: 1.0,
         });
     }
-    let values = thickness.iter().flatten().flatten().copied().filter(|v| v.is_finite());
+    let values = thickness
+        .iter()
+        .flatten()
+        .flatten()
+        .copied()
+        .filter(|v| v.is_finite());
     let value_range = values.fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], v| {
         [lo.min(v), hi.max(v)]
     });

@@ -188,7 +188,10 @@ where
     let keep = |&(px, py): &(f64, f64)| px.is_finite() && py.is_finite() && (!log || py > 0.0);
     for line in &panel.lines {
         let points: Vec<(f64, f64)> = line.points.iter().copied().filter(keep).collect();
-        chart.draw_series(LineSeries::new(points.iter().copied(), LINE.stroke_width(2)))?;
+        chart.draw_series(LineSeries::new(
+            points.iter().copied(),
+            LINE.stroke_width(2),
+        ))?;
         if line.dots {
             chart.draw_series(points.iter().map(|&p| Circle::new(p, 2, LINE.filled())))?;
         }
@@ -216,7 +219,11 @@ pub fn histogram(
     sets: &[Counted<'_>],
     bins: usize,
 ) -> Result<Option<String>, CliError> {
-    let finite = || sets.iter().flat_map(|s| s.values.iter().copied()).filter(|v| v.is_finite());
+    let finite = || {
+        sets.iter()
+            .flat_map(|s| s.values.iter().copied())
+            .filter(|v| v.is_finite())
+    };
     let (lo, hi) = span(finite());
     if !lo.is_finite() {
         return Ok(None);
@@ -236,7 +243,8 @@ pub fn histogram(
     let top = counts.iter().flatten().copied().max().unwrap_or(1) as f64 * 1.1;
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (2 * PANEL.0, PANEL.1 + 40)).into_drawing_area();
+        let root =
+            SVGBackend::with_string(&mut svg, (2 * PANEL.0, PANEL.1 + 40)).into_drawing_area();
         let fail = figure_error(title);
         root.fill(&WHITE).map_err(&fail)?;
         let mut chart = ChartBuilder::on(&root)
@@ -272,7 +280,9 @@ pub fn histogram(
                 .draw_series(counts.iter().enumerate().filter(|(_, &c)| c > 0).map(bar))
                 .map_err(&fail)?
                 .label(set.label.as_str())
-                .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], colour.filled()));
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 5), (x + 14, y + 5)], colour.filled())
+                });
         }
         chart
             .configure_series_labels()

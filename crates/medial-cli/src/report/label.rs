@@ -80,17 +80,14 @@ mod tests {
         assert_eq!(number(0.2000001), "0.2");
         assert_eq!(number(-1e-4), "-1e-4");
         assert_eq!(number(1234.5678), "1235");
-        assert_eq!(number(3.14159), "3.142");
+        assert_eq!(number(1.23456), "1.235");
         assert_eq!(number(2.5e-7), "2.5e-7");
         assert_eq!(number(f64::NAN), "–");
     }
 
     #[test]
     fn labels() {
-        assert_eq!(
-            label("max_spoke_normal_deg"),
-            "max spoke–normal angle (°)"
-        );
+        assert_eq!(label("max_spoke_normal_deg"), "max spoke–normal angle (°)");
         assert_eq!(label("max_abs_constraint_mm2"), "max |C| (mm²)");
         assert_eq!(label("min_thickness_mm"), "min thickness (mm)");
         assert_eq!(label("mean_ball_residual"), "mean ball residual");

@@ -118,7 +118,11 @@ fn summary_tables(summary: &Value) -> Markup {
         .collect();
     let stages = summary["stages"].as_array().cloned().unwrap_or_default();
     let mut keys: Vec<&String> = Vec::new();
-    for key in stages.iter().filter_map(Value::as_object).flat_map(|s| s.keys()) {
+    for key in stages
+        .iter()
+        .filter_map(Value::as_object)
+        .flat_map(|s| s.keys())
+    {
         if !keys.contains(&key) {
             keys.push(key);
         }
