@@ -102,7 +102,8 @@ fn every_frame_reads_back_with_its_colours_and_bounds() {
             assert_eq!(blend, surface.opacity < 1.0);
         }
     }
-    // One STEP sampler per frame over the real times: frame n is shown (scale 1) from t_n on.
+    // One STEP sampler per frame over the real times: frame n is shown (scale 1) from t_n on,
+    // the last frame for one more interval (0.75).
     let flow = gltf.animations().next().expect("an animation");
     let channels: Vec<gltf::animation::Channel> = flow.channels().collect();
     assert_eq!(channels.len(), 6);
@@ -118,12 +119,12 @@ fn every_frame_reads_back_with_its_colours_and_bounds() {
         );
         let reader = channel.reader(|_| Some(&blob));
         let times: Vec<f32> = reader.read_inputs().unwrap().collect();
-        assert_eq!(times, [0.0, 0.25, 1.0]);
+        assert_eq!(times, [0.0, 0.25, 1.0, 1.75]);
         let Some(gltf::animation::util::ReadOutputs::Scales(scales)) = reader.read_outputs() else {
             panic!("scale outputs");
         };
         let shown: Vec<bool> = scales.map(|s| s == [1.0; 3]).collect();
-        let expected: Vec<bool> = (0..3).map(|k| k == n).collect();
+        let expected: Vec<bool> = (0..4).map(|k| k == n || (n == 2 && k == 3)).collect();
         assert_eq!(shown, expected);
     }
 }
@@ -169,4 +170,20 @@ fn refuses_inconsistent_animations() {
         let err = glb_bytes(&a).expect_err(needle);
         assert!(err.contains(needle), "{err} lacks {needle}");
     }
+}
+
+#[test]
+fn one_frame_is_a_still_model() {
+    let mut a = animation();
+    a.times.truncate(1);
+    for s in &mut a.surfaces {
+        s.frames.truncate(1);
+        s.values.truncate(1);
+    }
+    let gltf = gltf::Gltf::from_slice(&glb_bytes(&a).expect("glb")).expect("valid glTF");
+    assert_eq!(gltf.animations().count(), 0);
+    let scene = gltf.default_scene().unwrap();
+    assert!(scene.nodes().all(|n| n.children().count() == 1));
+    // Every accessor is used: positions, colours of the boundary and the indices of each.
+    assert_eq!(gltf.accessors().count(), 5);
 }

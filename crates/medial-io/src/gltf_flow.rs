@@ -5,11 +5,13 @@
 //! frame; each child holds that frame's triangle mesh, its vertex colours (a value per vertex,
 //! such as the local thickness, through the viridis colormap over [`FlowAnimation::value_range`])
 //! and a material (double-sided; translucent when [`AnimatedSurface::opacity`] < 1). One
-//! animation, `flow`, shows frame `n` from its time `t_n` until the next frame's time: each
-//! child's `scale` is animated with `STEP` interpolation over the real times, `(1, 1, 1)` while
-//! its frame is shown and `(0, 0, 0)` otherwise, and every frame but the first starts hidden,
-//! so that a viewer without animations shows the first frame. Keyframe times are the flow times
-//! `t` themselves (a flow over `t ∈ [0, 1]` plays in one second; viewers can slow it down).
+//! animation, `flow`, shows frame `n` from its time `t_n` until the next frame's time, and the
+//! last frame for one more interval `t_N − t_{N−1}` (a looping viewer would otherwise show it
+//! only at the instant it wraps to the start): each child's `scale` is animated with `STEP`
+//! interpolation over the real times, `(1, 1, 1)` while its frame is shown and `(0, 0, 0)`
+//! otherwise, and every frame but the first starts hidden, so that a viewer without animations
+//! shows the first frame. Keyframe times are the flow times `t` themselves (a flow over
+//! `t ∈ [0, 1]` in N steps plays in 1 + 1/N seconds; viewers can slow it down).
 //!
 //! The buffer holds `float` positions and linear-RGB colours, `unsigned int` indices shared by
 //! the frames of a surface, the keyframe times and the scale keys, each in its own 4-byte
@@ -74,51 +76,20 @@ pub fn write_flow_glb(path: &Path, animation: &FlowAnimation) -> Result<()> {
 pub fn glb_bytes(animation: &FlowAnimation) -> std::result::Result<Vec<u8>, String> {
     check(animation)?;
     let mut doc = Document::default();
-    let times = doc.times(&animation.times);
-    let frame_count = animation.times.len();
-    let samplers: Vec<json::animation::Sampler> = (0..frame_count)
-        .map(|n| json::animation::Sampler {
-            extensions: None,
-            extras: Default::default(),
-            input: times,
-            interpolation: Valid(json::animation::Interpolation::Step),
-            output: doc.visibility(frame_count, n),
-        })
-        .collect();
-    let mut channels = Vec::new();
     let mut roots = Vec::new();
+    let mut frame_nodes = Vec::new();
     for surface in &animation.surfaces {
         let frames = doc.surface(surface, animation);
-        channels.extend(
-            frames
-                .iter()
-                .enumerate()
-                .map(|(n, &node)| json::animation::Channel {
-                    sampler: Index::new(n as u32),
-                    target: json::animation::Target {
-                        extensions: None,
-                        extras: Default::default(),
-                        node,
-                        path: Valid(json::animation::Property::Scale),
-                    },
-                    extensions: None,
-                    extras: Default::default(),
-                }),
-        );
         roots.push(doc.root.push(json::Node {
             name: Some(surface.name.clone()),
-            children: Some(frames),
+            children: Some(frames.clone()),
             ..json::Node::default()
         }));
+        frame_nodes.push(frames);
     }
-    if frame_count > 1 {
-        doc.root.animations.push(json::Animation {
-            extensions: None,
-            extras: Default::default(),
-            channels,
-            name: Some("flow".into()),
-            samplers,
-        });
+    if animation.times.len() > 1 {
+        let flow = doc.animation(&animation.times, &frame_nodes);
+        doc.root.animations.push(flow);
     }
     let [low, high] = animation.value_range;
     let scene = doc.root.push(json::Scene {
@@ -126,7 +97,7 @@ pub fn glb_bytes(animation: &FlowAnimation) -> std::result::Result<Vec<u8>, Stri
         extras: Default::default(),
         name: Some(if animation.surfaces.iter().any(|s| !s.values.is_empty()) {
             format!(
-                "flow; colours: {} from {low:.4} (dark blue) to {high:.4} (yellow), viridis",
+                "flow; colours: {} from {low:.4} (dark purple) to {high:.4} (yellow), viridis",
                 animation.value_name
             )
         } else {
@@ -136,6 +107,16 @@ pub fn glb_bytes(animation: &FlowAnimation) -> std::result::Result<Vec<u8>, Stri
     });
     doc.root.scene = Some(scene);
     doc.finish()
+}
+
+/// The keyframe times of frames at `times` (two or more): the times, then the last one plus
+/// the last interval, where the last frame is still shown.
+fn keyframe_times(times: &[f64]) -> Vec<f64> {
+    let mut keys = times.to_vec();
+    if let [.., before, last] = *times {
+        keys.push(last + (last - before));
+    }
+    keys
 }
 
 /// The checks of [`glb_bytes`].
@@ -291,16 +272,66 @@ impl Document {
         })
     }
 
+    /// The animation `flow` of the frame nodes of each surface (`frame_nodes[s][n]`, frame
+    /// `n` at `times[n]`): one `STEP` sampler of the scale per frame, shared by the surfaces.
+    fn animation(
+        &mut self,
+        times: &[f64],
+        frame_nodes: &[Vec<Index<json::Node>>],
+    ) -> json::Animation {
+        let keys = keyframe_times(times);
+        let input = self.times(&keys);
+        let samplers = (0..times.len())
+            .map(|n| json::animation::Sampler {
+                extensions: None,
+                extras: Default::default(),
+                input,
+                interpolation: Valid(json::animation::Interpolation::Step),
+                output: self.visibility(keys.len(), n),
+            })
+            .collect();
+        let channel = |(n, &node): (usize, &Index<json::Node>)| json::animation::Channel {
+            sampler: Index::new(n as u32),
+            target: json::animation::Target {
+                extensions: None,
+                extras: Default::default(),
+                node,
+                path: Valid(json::animation::Property::Scale),
+            },
+            extensions: None,
+            extras: Default::default(),
+        };
+        json::Animation {
+            extensions: None,
+            extras: Default::default(),
+            channels: frame_nodes
+                .iter()
+                .flat_map(|frames| frames.iter().enumerate().map(channel))
+                .collect(),
+            name: Some("flow".into()),
+            samplers,
+        }
+    }
+
     /// The keyframe times.
     fn times(&mut self, times: &[f64]) -> Index<json::Accessor> {
         let t: Vec<f32> = times.iter().map(|&t| t as f32).collect();
         self.floats(&t, json::accessor::Type::Scalar, None)
     }
 
-    /// The scale keys of frame `n` of `frames`: 1 at its keyframe, 0 at the others.
-    fn visibility(&mut self, frames: usize, n: usize) -> Index<json::Accessor> {
-        let keys: Vec<f32> = (0..frames)
-            .flat_map(|k| [if k == n { 1.0 } else { 0.0 }; 3])
+    /// The scale keys of frame `n` at `keys` keyframes (one per frame and the hold of the last
+    /// frame, see [`keyframe_times`]): 1 at its keyframe (the last frame also at the hold), 0
+    /// at the others.
+    fn visibility(&mut self, keys: usize, n: usize) -> Index<json::Accessor> {
+        let last = keys - 2;
+        let keys: Vec<f32> = (0..keys)
+            .flat_map(|k| {
+                [if k == n || (n == last && k > last) {
+                    1.0
+                } else {
+                    0.0
+                }; 3]
+            })
             .collect();
         self.floats(&keys, json::accessor::Type::Vec3, None)
     }
