@@ -151,7 +151,11 @@ type Spoil = fn(&mut FlowAnimation);
 
 #[test]
 fn refuses_inconsistent_animations() {
-    let cases: [(Spoil, &str); 5] = [
+    let cases: [(Spoil, &str); 6] = [
+        (
+            |a| a.surfaces[1].triangles.clear(),
+            "'medial': no triangles",
+        ),
         (|a| a.times[1] = 0.0, "the times must increase"),
         (|a| a.surfaces[0].frames.truncate(2), "2 frames"),
         (

@@ -71,8 +71,8 @@ pub fn write_flow_glb(path: &Path, animation: &FlowAnimation) -> Result<()> {
 /// The bytes of the binary glTF file of `animation`.
 ///
 /// Errors (as text): no frame or no surface, times not finite or not increasing, a surface
-/// whose frames or values do not match the times or each other in number, a triangle naming
-/// a missing vertex, a coordinate or value that is not finite, an opacity outside `(0, 1]`.
+/// whose frames or values do not match the times or each other in number, a surface without
+/// triangles or with a triangle naming a missing vertex, a coordinate or value that is not finite, an opacity outside `(0, 1]`.
 pub fn glb_bytes(animation: &FlowAnimation) -> std::result::Result<Vec<u8>, String> {
     check(animation)?;
     let mut doc = Document::default();
@@ -155,6 +155,9 @@ fn check_surface(s: &AnimatedSurface, frames: usize) -> std::result::Result<(), 
         return Err(format!(
             "frame {k} has another number of vertices or values than frame 0 ({n})"
         ));
+    }
+    if s.triangles.is_empty() {
+        return Err("no triangles".into());
     }
     if let Some(t) = s.triangles.iter().find(|t| t.iter().any(|&v| v >= n)) {
         return Err(format!(
