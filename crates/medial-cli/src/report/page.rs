@@ -76,13 +76,32 @@ fn cell(value: &Value) -> String {
         Value::Bool(b) => if *b { "yes" } else { "no" }.into(),
         Value::String(s) => s.clone(),
         Value::Null => "–".into(),
-        Value::Array(items) => items.iter().map(cell).collect::<Vec<_>>().join("; "),
+        Value::Array(items) => runs(items.iter().map(cell)),
         Value::Object(map) => map
             .iter()
             .map(|(k, v)| format!("{}: {}", label(k), cell(v)))
             .collect::<Vec<_>>()
             .join("; "),
     }
+}
+
+/// Items joined by `; `, a run of equal items written once with its count (`x (×6)`).
+fn runs(items: impl Iterator<Item = String>) -> String {
+    let mut grouped: Vec<(String, usize)> = Vec::new();
+    for item in items {
+        match grouped.last_mut() {
+            Some((last, count)) if *last == item => *count += 1,
+            _ => grouped.push((item, 1)),
+        }
+    }
+    grouped
+        .into_iter()
+        .map(|(item, count)| match count {
+            1 => item,
+            _ => format!("{item} (×{count})"),
+        })
+        .collect::<Vec<_>>()
+        .join("; ")
 }
 
 /// A two-column table of the entries of `map` (all but `skip`).
@@ -324,5 +343,34 @@ fn files(folder: &FitFolder) -> Markup {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cells_of_json_values() {
+        let stops = serde_json::json!(["budget", "budget", "gradient", "budget"]);
+        assert_eq!(cell(&stops), "budget (×2); gradient; budget");
+        assert_eq!(cell(&serde_json::json!(0.25)), "0.25");
+        assert_eq!(cell(&serde_json::json!(true)), "yes");
+        assert_eq!(cell(&Value::Null), "–");
+    }
+
+    #[test]
+    fn stage_runs_follow_the_log() {
+        let log = Table {
+            columns: vec!["stage".into()],
+            rows: [["a"], ["a"], ["b"], ["b"], ["b"]]
+                .iter()
+                .map(|r| r.iter().map(|s| s.to_string()).collect())
+                .collect(),
+        };
+        assert_eq!(
+            stage_runs(&log),
+            [("a".to_owned(), 0, 2), ("b".to_owned(), 2, 5)]
+        );
     }
 }
