@@ -157,7 +157,7 @@ fn every_shared_file_reads_and_round_trips() {
             for options in all_options() {
                 let back = parse_polydata(&polydata_to_bytes(&data, options), &path)
                     .unwrap_or_else(|e| panic!("{options:?}: {e}"));
-                assert_eq!(back, fields_last(&data), "{} {options:?}", path.display());
+                assert_eq!(back, as_written(&data), "{} {options:?}", path.display());
             }
             count += 1;
         }
@@ -358,14 +358,20 @@ fn legacy_binary_int_arrays_and_lookup_table() {
 // ---------------------------------------------------------------------------------------------
 // Round trips.
 
-/// `data` with each attribute set's FIELD arrays after the others, as they come back.
-fn fields_last(data: &PolyData) -> PolyData {
+/// `data` as it comes back: in each attribute set the first SCALARS, NORMALS and VECTORS
+/// array keep their kind, every other array comes back as a FIELD array, after them.
+fn as_written(data: &PolyData) -> PolyData {
     let order = |arrays: &[DataArray]| {
-        let (mut first, fields): (Vec<_>, Vec<_>) = arrays
-            .iter()
-            .cloned()
-            .partition(|a| a.kind != ArrayKind::Field);
-        first.extend(fields);
+        let mut seen = Vec::new();
+        let (mut first, fields): (Vec<_>, Vec<_>) = arrays.iter().cloned().partition(|a| {
+            let attribute = a.kind != ArrayKind::Field && !seen.contains(&a.kind);
+            seen.push(a.kind);
+            attribute
+        });
+        first.extend(fields.into_iter().map(|a| DataArray {
+            kind: ArrayKind::Field,
+            ..a
+        }));
         first
     };
     PolyData {
@@ -468,7 +474,7 @@ proptest! {
     #[test]
     fn round_trip(data in polydata_strategy()) {
         prop_assert_eq!(data.validate(), Ok(()));
-        let expected = fields_last(&data);
+        let expected = as_written(&data);
         for options in all_options() {
             let bytes = polydata_to_bytes(&data, options);
             let back = parse_polydata(&bytes, Path::new("random.vtk"));
@@ -511,6 +517,64 @@ fn write_read_files() {
     )
     .expect("write mesh");
     assert_eq!(read_trimesh(&path).expect("read mesh"), mesh);
+}
+
+/// VTK's legacy reader sees only the first SCALARS (NORMALS, VECTORS) array of an attribute
+/// set unless told to read them all, but every FIELD array: the writer keeps one of each kind
+/// and puts the others in one FIELD block.
+#[test]
+fn one_array_of_each_attribute_kind_the_others_in_one_field_block() {
+    let mut data = PolyData {
+        points: vec![Vec3::zeros(); 2],
+        ..PolyData::default()
+    };
+    let array = |name: &str, kind, components| DataArray {
+        name: name.into(),
+        components,
+        values: vec![1.0; 2 * components],
+        kind,
+        value_type: ValueType::Double,
+    };
+    data.point_data = vec![
+        array("Angle", ArrayKind::Scalars, 1),
+        array("Normals", ArrayKind::Normals, 3),
+        array("Mismatch", ArrayKind::Scalars, 1),
+        array("Other normals", ArrayKind::Normals, 3),
+        array("Index", ArrayKind::Field, 1),
+    ];
+    let text = String::from_utf8(polydata_to_bytes(&data, WriteOptions::default())).expect("utf8");
+    let headers: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with(|c: char| c.is_ascii_uppercase()))
+        .skip_while(|l| !l.starts_with("POINT_DATA"))
+        .collect();
+    assert_eq!(
+        headers,
+        [
+            "POINT_DATA 2",
+            "SCALARS Angle double 1",
+            "LOOKUP_TABLE default",
+            "NORMALS Normals double",
+            "FIELD FieldData 3",
+            "Mismatch 1 2 double",
+            "Other%20normals 3 2 double",
+            "Index 1 2 double",
+        ],
+        "{text}"
+    );
+    let back = parse_str(&text).expect("parse");
+    assert_eq!(back, as_written(&data));
+    let kinds: Vec<ArrayKind> = back.point_data.iter().map(|a| a.kind).collect();
+    assert_eq!(
+        kinds,
+        [
+            ArrayKind::Scalars,
+            ArrayKind::Normals,
+            ArrayKind::Field,
+            ArrayKind::Field,
+            ArrayKind::Field
+        ]
+    );
 }
 
 #[test]

@@ -87,6 +87,14 @@ pub enum CliError {
         /// Determinant of the 3×3 linear part.
         determinant: f64,
     },
+    /// A figure of the report could not be drawn.
+    #[error("report figure '{figure}': {message}")]
+    Figure {
+        /// The figure.
+        figure: String,
+        /// The plotting library's message.
+        message: String,
+    },
     /// An operating-system error outside the file layer (creating the output folder).
     #[error("{}: {source}", path.display())]
     Io {

@@ -12,6 +12,7 @@ mod memory;
 mod output;
 mod plan;
 mod progress;
+mod report;
 mod stage;
 mod summary;
 mod time_points;

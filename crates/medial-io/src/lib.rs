@@ -13,7 +13,8 @@
 //!
 //! | module | what it holds | entry points |
 //! |---|---|---|
-//! | [`vtk`] | legacy VTK polydata: ASCII and binary, 3.0/4.x and 5.1 layouts, point and cell arrays | [`vtk::read_polydata`], [`vtk::write_polydata`], [`vtk::PolyData`] |
+//! | [`vtk`] | legacy VTK polydata: ASCII and binary, 3.0/4.x and 5.1 layouts, point and cell arrays; ParaView's `.vtk.series` | [`vtk::read_polydata`], [`vtk::write_polydata`], [`vtk::PolyData`], [`vtk::write_series`] |
+//! | [`gltf_flow`] | surfaces animated over the frames of a flow, with vertex colours, as binary glTF | [`gltf_flow::write_flow_glb`], [`gltf_flow::FlowAnimation`] |
 //! | [`cmrep`] | cmrep boundary medial templates ⇄ [`MedialTemplate`](medial_core::MedialTemplate) | [`cmrep::read_template`], [`cmrep::write_template`] |
 //! | [`mesh`] | triangle meshes chosen by extension: `.vtk`, `.obj`, `.gltf`/`.glb`; point sets | [`mesh::read_mesh`], [`mesh::write_mesh`], [`mesh::read_points`] |
 //! | [`volume`] | a volume in any supported format, by file name; the grid checks every volume reader applies | [`volume::read_volume`], [`volume::check_grid`] |
@@ -33,6 +34,7 @@ pub mod atomic;
 pub mod cmrep;
 pub mod error;
 pub mod exr_volume;
+pub mod gltf_flow;
 pub mod mesh;
 pub mod model;
 pub mod nifti_volume;

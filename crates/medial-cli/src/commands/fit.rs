@@ -536,6 +536,7 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
     };
     write_json(&options.out.join("summary.json"), &summary)?;
     log.finish()?;
+    crate::report::write(&options.out)?;
     match failure {
         Some(e) => Err(e),
         None => Ok(summary),

@@ -1,12 +1,13 @@
 //! The commands of `medial`, one module each: [`fit`] and [`eval`] run a TOML schedule;
 //! [`inflate`], [`project`] and [`synth`] build templates and synthetic cases; [`rasterize`]
-//! turns a closed mesh into a mask.
+//! turns a closed mesh into a mask; [`report`] writes the views of a fit folder again.
 
 mod eval;
 mod fit;
 mod inflate;
 mod project;
 mod rasterize;
+mod report;
 mod synth;
 
 use crate::config::Config;
@@ -21,7 +22,9 @@ pub enum Command {
     /// Run the stages of a TOML config, or without one an automatic schedule for --template
     /// and one of --image, --target, --surface; write config.toml (the resolved config),
     /// summary.json, log.csv, momenta.npy, lambda.npy, the flow of the model
-    /// (flow/boundary_tNNN.vtk, flow/medial_tNNN.vtk), time_points.csv and fitted_template.vtk.
+    /// (flow/boundary_tNNN.vtk, flow/medial_tNNN.vtk and their ParaView series
+    /// flow/boundary.vtk.series, flow/medial.vtk.series), flow.glb (the flow animated over t,
+    /// coloured by thickness), time_points.csv, fitted_template.vtk and report.html.
     Fit {
         /// The config file (TOML); relative paths in it are relative to its folder. With it,
         /// --template and the targets override the config's.
@@ -65,6 +68,9 @@ pub enum Command {
     Synth(synth::SynthArgs),
     /// Rasterize a closed triangle mesh into a binary NIfTI mask.
     Rasterize(rasterize::RasterizeArgs),
+    /// Write report.html, flow.glb and the ParaView series (flow/*.vtk.series) of a fit folder
+    /// again from its files.
+    Report(report::ReportArgs),
 }
 
 /// Parses `--mu`: a positive, finite penalty weight.
@@ -129,6 +135,7 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
         Command::Project(args) => project::run(&args)?,
         Command::Synth(args) => synth::run(&args)?,
         Command::Rasterize(args) => rasterize::run(&args)?,
+        Command::Report(args) => report::run(&args)?,
     }
     Ok(())
 }

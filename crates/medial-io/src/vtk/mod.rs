@@ -18,8 +18,11 @@
 //!
 //! Writing is lossless for what a [`PolyData`] holds: points as `double`, arrays in their
 //! [`ValueType`] (an `Int` array is written as `int`, or as `vtktypeint64`/`double` when its
-//! values do not fit), one `FIELD` block per attribute set after the `SCALARS`/`NORMALS`/
-//! `VECTORS` arrays. Files are written atomically.
+//! values do not fit). In each attribute set the first `SCALARS`, `NORMALS` and `VECTORS`
+//! array are written as those attributes and every other array in one `FIELD FieldData n`
+//! block after them, so that VTK's own reader, which reads only the first array of each
+//! attribute kind by default but every `FIELD` array, sees them all. Files are written
+//! atomically. [`write_series`] writes ParaView's `.vtk.series` index of a time series.
 //!
 //! | file | what it holds |
 //! |---|---|
@@ -29,18 +32,21 @@
 //! | `cursor` | tokens, lines, ASCII and binary values, `METADATA` blocks |
 //! | `scalar`, `text` | VTK's numeric types, integers and array names as text |
 //! | `writer` | [`write_polydata`], [`polydata_to_bytes`], [`write_trimesh`], [`WriteOptions`] |
+//! | `series` | [`write_series`], [`SeriesFile`]: ParaView's JSON index of a time series of files |
 
 mod attributes;
 mod cursor;
 mod polydata;
 mod reader;
 mod scalar;
+mod series;
 mod text;
 mod writer;
 
 pub use polydata::{ArrayKind, DataArray, PolyData, ValueType};
 pub use reader::{parse_polydata, read_polydata, read_trimesh};
 pub(crate) use scalar::push_f64;
+pub use series::{series_json, write_series, SeriesFile};
 pub use writer::{
     polydata_to_bytes, write_polydata, write_trimesh, Encoding, Layout, WriteOptions,
 };

@@ -7,7 +7,9 @@ use medial_core::{TriMesh, Vec3};
 
 use crate::{Error, Result};
 
-/// How a data array was (or will be) stored in the file.
+/// How a data array was (or will be) stored in the file. The writer stores only the first
+/// `Scalars`, `Normals` and `Vectors` array of an attribute set as that attribute and the
+/// others as `FIELD` arrays (VTK's legacy reader sees only the first of each attribute kind).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ArrayKind {
     /// `SCALARS name type ncomp` (with `LOOKUP_TABLE default`).

@@ -118,6 +118,24 @@ fn file_scalar(array: &DataArray) -> Scalar {
     }
 }
 
+/// The arrays of one attribute set as they are written: the first `SCALARS`, the first
+/// `NORMALS` and the first `VECTORS` array as attributes, in order, and every other array in
+/// the `FIELD` block. VTK's legacy reader (`vtkDataReader`) reads only the first array of each
+/// attribute kind unless told to read them all (`ReadAllScalarsOn`, ...), but every `FIELD`
+/// array: written so, every array is seen by a plain reader and by ParaView, the first
+/// `SCALARS` array is the active scalars and the first `NORMALS` the normals (as cmrep reads
+/// them).
+fn split_attributes(arrays: &[DataArray]) -> (Vec<&DataArray>, Vec<&DataArray>) {
+    let mut seen = Vec::new();
+    arrays.iter().partition(|array| {
+        let attribute = array.kind != ArrayKind::Field && !seen.contains(&array.kind);
+        if attribute {
+            seen.push(array.kind);
+        }
+        attribute
+    })
+}
+
 /// Values per ASCII line for tuples of `components`: whole tuples, about nine values.
 fn values_per_line(components: usize) -> usize {
     components * (9 / components).max(1)
@@ -216,22 +234,18 @@ impl Writer {
         self.block(Scalar::I64, &ids, 9);
     }
 
-    /// `POINT_DATA`/`CELL_DATA`: `SCALARS`, `NORMALS` and `VECTORS` arrays in order, then one
-    /// `FIELD` block with the `Field` arrays.
+    /// `POINT_DATA`/`CELL_DATA`: the arrays of [`split_attributes`], the attributes first
+    /// (`SCALARS`, `NORMALS`, `VECTORS`), then one `FIELD FieldData n` block with the others.
     fn attributes(&mut self, set: &str, arrays: &[DataArray], tuples: usize) {
         if arrays.is_empty() {
             return;
         }
         self.text(&format!("{set} {tuples}\n"));
-        let mut fields = Vec::new();
-        for array in arrays {
+        let (attributes, fields) = split_attributes(arrays);
+        for array in attributes {
             let scalar = file_scalar(array);
             let name = encode_name(&array.name);
             let header = match array.kind {
-                ArrayKind::Field => {
-                    fields.push(array);
-                    continue;
-                }
                 ArrayKind::Scalars => format!(
                     "SCALARS {name} {} {}\nLOOKUP_TABLE default\n",
                     scalar.name(),
@@ -239,6 +253,7 @@ impl Writer {
                 ),
                 ArrayKind::Normals => format!("NORMALS {name} {}\n", scalar.name()),
                 ArrayKind::Vectors => format!("VECTORS {name} {}\n", scalar.name()),
+                ArrayKind::Field => unreachable!("split_attributes keeps FIELD arrays apart"),
             };
             self.text(&header);
             self.block(scalar, &array.values, values_per_line(array.components));

@@ -1,0 +1,49 @@
+//! What a person looks at in a fit folder, written from the folder's own files (so that
+//! `medial report DIR` can write it again for any fit folder):
+//!
+//! | file | what |
+//! |---|---|
+//! | `flow/boundary.vtk.series`, `flow/medial.vtk.series` | ParaView's index of the time point files with their times `t = n / N` |
+//! | `flow.glb` | the boundary and the medial sheet animated over `t`, coloured by thickness ([`animation`]) |
+//! | `report.html` | the figures and tables of the fit, self-contained ([`page`]) |
+//!
+//! [`folder`] reads the fit folder, [`table`] its CSV files, [`figures`] draws with plotters,
+//! [`label`] names columns and writes numbers.
+
+mod animation;
+mod figures;
+mod folder;
+mod label;
+mod page;
+mod table;
+
+use crate::error::CliError;
+use crate::output::write_text;
+use folder::{FitFolder, FlowKind};
+use medial_io::vtk::{write_series, SeriesFile};
+use std::path::Path;
+
+/// Writes the series, `flow.glb` and `report.html` of the fit folder `dir` from its files.
+///
+/// Errors: [`CliError::File`] when `summary.json` or `log.csv` is missing or malformed, a
+/// file under `flow/` cannot be read, or an output cannot be written; [`CliError::Figure`] when
+/// a figure cannot be drawn.
+pub fn write(dir: &Path) -> Result<(), CliError> {
+    let folder = FitFolder::read(dir)?;
+    for kind in [FlowKind::Boundary, FlowKind::Medial] {
+        let files: Vec<SeriesFile> = folder
+            .files(kind)
+            .iter()
+            .map(|f| SeriesFile {
+                name: f.name.clone(),
+                time: f.time,
+            })
+            .collect();
+        if !files.is_empty() {
+            let path = dir.join("flow").join(format!("{}.vtk.series", kind.name()));
+            write_series(&path, &files)?;
+        }
+    }
+    animation::write(&folder, &dir.join("flow.glb"))?;
+    write_text(&dir.join("report.html"), &page::render(&folder)?)
+}
