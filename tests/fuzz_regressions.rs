@@ -36,7 +36,10 @@ fn npy_header_nested_deep_is_refused_at_once() {
     );
     let error = parse_npy(&npy(1, &nested, &[]), path).unwrap_err();
     clean::assert_clean(&error, path);
-    assert!(error.to_string().contains("nests brackets 31 deep"), "{error}");
+    assert!(
+        error.to_string().contains("nests brackets 31 deep"),
+        "{error}"
+    );
     // The deepest nesting read still reaches the header parser (and its own error).
     let depth = MAX_HEADER_DEPTH - 1;
     let nested = format!("{{'shape': {}{}}}\n", "[".repeat(depth), "]".repeat(depth));

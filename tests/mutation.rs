@@ -11,13 +11,13 @@ use medial::image::volume::Volume;
 use medial::io::cmrep::{read_template, template_to_polydata};
 use medial::io::exr_volume::{read_exr_volume, write_exr_volume};
 use medial::io::mesh::read_mesh;
-use medial_cli::config::Config;
 use medial::io::nifti_volume::{read_nifti, write_nifti, NiftiType};
 use medial::io::npy::{read_npy, write_npy};
 use medial::io::vtk::{
     polydata_to_bytes, read_polydata, ArrayKind, DataArray, Encoding, Layout, PolyData, ValueType,
     WriteOptions,
 };
+use medial_cli::config::Config;
 use nalgebra::Matrix4;
 use proptest::prelude::*;
 use proptest::sample::Index;

@@ -317,7 +317,10 @@ fn check_buffer_files(document: &gltf::Document, path: &Path) -> Result<()> {
             continue;
         };
         let file = if uri.contains(':') {
-            match uri.strip_prefix("file://").or_else(|| uri.strip_prefix("file:")) {
+            match uri
+                .strip_prefix("file://")
+                .or_else(|| uri.strip_prefix("file:"))
+            {
                 Some(file) => PathBuf::from(file),
                 None => continue,
             }
