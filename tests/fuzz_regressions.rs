@@ -1,9 +1,12 @@
 //! The inputs on which the cargo-fuzz targets (`fuzz/`) found a panic, a hang or an
-//! unbounded allocation, minimised: each must now give a clean one-line error.
+//! unbounded allocation, minimised, and those found while reading the libraries the readers
+//! trust: each must now give a clean one-line error.
 
 use std::path::Path;
 
+use medial::image::volume::Volume;
 use medial::io::mesh::{parse_gltf, read_mesh};
+use medial::io::nifti_volume::{parse_nifti, write_nifti, NiftiType};
 use medial::io::npy::{parse_npy, MAX_HEADER_DEPTH};
 use medial::io::Error;
 
@@ -114,4 +117,30 @@ fn gltf_buffer_that_is_no_regular_file_is_refused() {
             "{uri}: {error}"
         );
     }
+}
+
+/// A gzip NIfTI is inflated only as far as its header declares, yet checked to the end of the
+/// stream: data followed by a long tail of zeros read as the volume, and a checksum broken
+/// after the data is still refused.
+#[test]
+fn gzip_nifti_is_read_to_its_data_and_checked_to_its_end() {
+    use std::io::Write as _;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let plain = dir.path().join("v.nii");
+    let affine = nalgebra::Matrix4::new_scaling(0.5);
+    let volume = Volume::new([3, 2, 2], (0..12).map(f64::from).collect(), affine).unwrap();
+    write_nifti(&plain, &volume, NiftiType::F32).expect("write the volume");
+    let mut file = std::fs::read(&plain).expect("read it back");
+    file.resize(file.len() + (1 << 20), 0);
+    let mut encoder = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+    encoder.write_all(&file).expect("compress");
+    let mut gz = encoder.finish().expect("compress");
+    let path = Path::new("v.nii.gz");
+    let read = parse_nifti(gz.clone(), path).expect("a valid gzip NIfTI");
+    assert_eq!(read.data(), volume.data());
+    let crc = gz.len() - 8;
+    gz[crc] ^= 1;
+    let error = parse_nifti(gz, path).unwrap_err();
+    clean::assert_clean(&error, path);
+    assert!(error.to_string().contains("invalid gzip data"), "{error}");
 }
