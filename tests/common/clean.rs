@@ -3,7 +3,7 @@
 use std::path::Path;
 
 /// Asserts that `error` is clean: its message is one line that starts with the file's name.
-pub fn assert_clean(error: &medial::io::Error, path: &Path) {
+pub fn assert_clean(error: &impl std::fmt::Display, path: &Path) {
     let message = error.to_string();
     assert!(
         message.starts_with(&format!("{}: ", path.display())),

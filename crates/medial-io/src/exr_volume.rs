@@ -52,14 +52,22 @@ pub const MAX_COMPRESSION_RATIO: u64 = 4096;
 /// [`Error::Model`] for values the engine refuses (NaN).
 pub fn read_exr_volume(path: &Path) -> Result<Volume> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    check_declared_size(&bytes, path)?;
+    parse_exr_volume(&bytes, path)
+}
+
+/// Parses the bytes of an OpenEXR file as [`read_exr_volume`] does (`path` is only used in
+/// error messages).
+///
+/// Errors: as [`read_exr_volume`], but for [`Error::Io`].
+pub fn parse_exr_volume(bytes: &[u8], path: &Path) -> Result<Volume> {
+    check_declared_size(bytes, path)?;
     let image = read()
         .no_deep_data()
         .largest_resolution_level()
         .all_channels()
         .first_valid_layer()
         .all_attributes()
-        .from_buffered(Cursor::new(bytes.as_slice()))
+        .from_buffered(Cursor::new(bytes))
         .map_err(|e| exr_error(path, e))?;
     let layer = &image.layer_data;
     let (width, height) = (layer.size.width(), layer.size.height());

@@ -9,7 +9,7 @@
 use std::collections::HashSet;
 use std::fmt::Display;
 use std::io::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use gltf::accessor::{DataType, Dimensions};
 use medial_core::{TriMesh, Vec3};
@@ -114,7 +114,12 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>> {
 // ---------------------------------------------------------------------------------------------
 // OBJ.
 
-fn parse_obj(bytes: &[u8], path: &Path) -> Result<TriMesh> {
+/// Parses the bytes of a Wavefront OBJ file as [`read_mesh`] reads `.obj` (`path` is only used
+/// in error messages).
+///
+/// Errors: [`Error::Format`] for a malformed `v` or `f` statement or a non-triangle face
+/// (naming the line); [`Error::Model`] when [`TriMesh::new`] refuses the mesh.
+pub fn parse_obj(bytes: &[u8], path: &Path) -> Result<TriMesh> {
     let mut points = Vec::new();
     let mut triangles = Vec::new();
     for (number, line) in bytes.split(|&b| b == b'\n').enumerate() {
@@ -215,13 +220,21 @@ fn obj_bytes(mesh: &TriMesh) -> Vec<u8> {
 // ---------------------------------------------------------------------------------------------
 // glTF.
 
-fn parse_gltf(bytes: &[u8], path: &Path) -> Result<TriMesh> {
+/// Parses the bytes of a glTF 2.0 file (JSON `.gltf` or binary `.glb`, told apart by the GLB
+/// magic) as [`read_mesh`] reads it; external buffers are resolved against the folder of
+/// `path`, which error messages name.
+///
+/// Errors: as [`read_mesh`] for `.gltf`/`.glb`, and [`Error::Accessor`] for an accessor that
+/// cannot be read as what its primitive uses it for.
+pub fn parse_gltf(bytes: &[u8], path: &Path) -> Result<TriMesh> {
     let invalid = |e: gltf::Error| Error::format(path, format!("invalid glTF: {e}"));
+    check_glb_length(bytes, path)?;
     let gltf::Gltf { document, blob } =
         gltf::Gltf::from_slice_without_validation(bytes).map_err(invalid)?;
     // The crate's validation itself indexes the POSITION accessors without a check.
     check_position_indices(document.as_json(), path)?;
     let document = gltf::Document::from_json(document.into_json()).map_err(invalid)?;
+    check_buffer_files(&document, path)?;
     let buffers = gltf::import_buffers(&document, path.parent(), blob)
         .map_err(|e| Error::format(path, format!("cannot load the glTF buffers: {e}")))?;
     let mut points = Vec::new();
@@ -237,6 +250,31 @@ fn parse_gltf(bytes: &[u8], path: &Path) -> Result<TriMesh> {
         }
     }
     TriMesh::new(points, triangles).map_err(|e| Error::model(path, e))
+}
+
+/// The magic number that opens a GLB file.
+const GLB_MAGIC: &[u8] = b"glTF";
+
+/// Bytes of the GLB header: magic, version and the length of the whole file (u32 each).
+const GLB_HEADER_BYTES: u32 = 12;
+
+/// Refuses a GLB header whose length is below the header's own 12 bytes (the `gltf` crate
+/// subtracts them without a check).
+fn check_glb_length(bytes: &[u8], path: &Path) -> Result<()> {
+    let declared = bytes
+        .strip_prefix(GLB_MAGIC)
+        .and_then(|rest| rest.get(4..8))
+        .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]));
+    match declared {
+        Some(length) if length < GLB_HEADER_BYTES => Err(Error::format(
+            path,
+            format!(
+                "invalid glTF: the GLB header declares {length} bytes in all, fewer than the \
+                 {GLB_HEADER_BYTES} of the header itself"
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// Refuses a `POSITION` attribute that names an accessor the document does not have.
@@ -260,6 +298,53 @@ fn check_position_indices(root: &gltf::json::Root, path: &Path) -> Result<()> {
                 }
                 _ => {}
             }
+        }
+    }
+    Ok(())
+}
+
+/// Refuses an external buffer that the `gltf` crate cannot load safely (it resolves `file:`
+/// and relative URIs against the folder of `path`, as done here): a relative URI that is not
+/// UTF-8 once percent-decoded (the crate panics) and a file that is not a regular file (a
+/// device or a pipe such as `/dev/zero` would be read without end). Data URIs, other schemes
+/// and missing files are left to the crate's own errors.
+fn check_buffer_files(document: &gltf::Document, path: &Path) -> Result<()> {
+    let Some(folder) = path.parent() else {
+        return Ok(());
+    };
+    for buffer in document.buffers() {
+        let gltf::buffer::Source::Uri(uri) = buffer.source() else {
+            continue;
+        };
+        let file = if uri.contains(':') {
+            match uri
+                .strip_prefix("file://")
+                .or_else(|| uri.strip_prefix("file:"))
+            {
+                Some(file) => PathBuf::from(file),
+                None => continue,
+            }
+        } else {
+            let decoded = urlencoding::decode(uri).map_err(|_| {
+                Error::format(
+                    path,
+                    format!(
+                        "buffer {}: the uri {uri:?} is not UTF-8 once percent-decoded",
+                        buffer.index()
+                    ),
+                )
+            })?;
+            folder.join(&*decoded)
+        };
+        if std::fs::metadata(&file).is_ok_and(|m| !m.is_file()) {
+            return Err(Error::format(
+                path,
+                format!(
+                    "buffer {}: {} is not a regular file",
+                    buffer.index(),
+                    file.display()
+                ),
+            ));
         }
     }
     Ok(())

@@ -81,7 +81,40 @@ pub enum NiftiType {
 /// [`Error::Geometry`] for a grid that cannot place voxels in the world; [`Error::Model`] for
 /// values the engine refuses (NaN voxels).
 pub fn read_nifti(path: &Path) -> Result<Volume> {
-    let mut bytes = decompressed(path)?;
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    parse_nifti(bytes, path)
+}
+
+/// Parses the bytes of a `.nii` or `.nii.gz` file (gzip by its magic number, not the name) as
+/// [`read_nifti`] does (`path` is only used in error messages). A gzip stream is inflated only
+/// as far as the header declares (header, then `vox_offset` and the voxel data), so that a
+/// small file cannot fill the memory; the rest of the stream is checked without being kept.
+///
+/// Errors: as [`read_nifti`], but for [`Error::Io`].
+pub fn parse_nifti(bytes: Vec<u8>, path: &Path) -> Result<Volume> {
+    if !bytes.starts_with(&GZIP_MAGIC) {
+        return volume_from(bytes, path, |_, _| Ok(()));
+    }
+    let mut decoder = flate2::read::GzDecoder::new(bytes.as_slice());
+    let mut head = Vec::new();
+    inflate(&mut decoder, &mut head, HEADER_BYTES, path)?;
+    volume_from(head, path, |file, end| {
+        inflate(&mut decoder, file, end, path)?;
+        // The end of the stream (and its checksum) is checked, what follows the data dropped.
+        std::io::copy(&mut decoder, &mut std::io::sink())
+            .map(drop)
+            .map_err(|e| gzip_error(path, e))
+    })
+}
+
+/// The volume of a NIfTI-1 file whose first bytes are `bytes`; `more(bytes, end)` appends
+/// the file's next bytes up to `end` in all (fewer where the file ends), once the header told
+/// where its voxel data end.
+fn volume_from(
+    mut bytes: Vec<u8>,
+    path: &Path,
+    mut more: impl FnMut(&mut Vec<u8>, usize) -> Result<()>,
+) -> Result<Volume> {
     let header = parse_header(&bytes, path)?;
     let datatype = check_datatype(&header).map_err(|m| Error::format(path, m))?;
     let dims = spatial_dims(&header, path)?;
@@ -90,6 +123,7 @@ pub fn read_nifti(path: &Path) -> Result<Volume> {
         problem,
     })?;
     check_grid(path, dims, &affine)?;
+    more(&mut bytes, data_end(&header, dims, datatype))?;
     let data = voxel_data_range(&header, bytes.len(), dims, datatype, path)?;
     bytes.truncate(data.end);
     bytes.drain(..data.start);
@@ -115,17 +149,23 @@ pub fn read_nifti(path: &Path) -> Result<Volume> {
     Volume::new(dims, data, affine).map_err(|e| Error::model(path, e))
 }
 
-/// The bytes of the file, decompressed if they are gzip (by their magic number, not the name).
-fn decompressed(path: &Path) -> Result<Vec<u8>> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    if !bytes.starts_with(&GZIP_MAGIC) {
-        return Ok(bytes);
-    }
-    let mut out = Vec::new();
-    flate2::read::GzDecoder::new(bytes.as_slice())
-        .read_to_end(&mut out)
-        .map_err(|e| Error::format(path, format!("invalid gzip data: {e}")))?;
-    Ok(out)
+/// Appends the bytes of `decoder` to `out` until it holds `end` bytes or the stream ends.
+fn inflate(
+    decoder: &mut impl std::io::Read,
+    out: &mut Vec<u8>,
+    end: usize,
+    path: &Path,
+) -> Result<()> {
+    let wanted = end.saturating_sub(out.len()) as u64;
+    decoder
+        .take(wanted)
+        .read_to_end(out)
+        .map(drop)
+        .map_err(|e| gzip_error(path, e))
+}
+
+fn gzip_error(path: &Path, error: std::io::Error) -> Error {
+    Error::format(path, format!("invalid gzip data: {error}"))
 }
 
 /// The header of a single-file NIfTI-1 image.
@@ -149,6 +189,22 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<NiftiHeader> {
     Ok(header)
 }
 
+/// Where the voxel data end, bytes from the start of the (decompressed) file, if `vox_offset`
+/// places them in it: `max(vox_offset, 352) + nx·ny·nz·size`, saturating.
+fn data_end(header: &NiftiHeader, dims: [usize; 3], datatype: nifti::NiftiType) -> usize {
+    data_start(header).saturating_add(data_bytes(dims, datatype))
+}
+
+/// `max(vox_offset, 352)` (saturating; a negative or NaN offset gives 352).
+fn data_start(header: &NiftiHeader) -> usize {
+    (header.vox_offset as usize).max(MIN_DATA_OFFSET)
+}
+
+/// `nx·ny·nz·size` of the voxel data (at most 32767³ · 16 bytes: no overflow).
+fn data_bytes(dims: [usize; 3], datatype: nifti::NiftiType) -> usize {
+    dims.iter().product::<usize>() * datatype.size_of()
+}
+
 /// Where the voxel data lie in the (decompressed) file of `len` bytes: from `vox_offset` (at
 /// least [`MIN_DATA_OFFSET`]) for `nx·ny·nz` values of `datatype`.
 fn voxel_data_range(
@@ -167,8 +223,8 @@ fn voxel_data_range(
             file_len: len as u64,
         });
     }
-    let start = (vox_offset as usize).max(MIN_DATA_OFFSET);
-    let needed = dims.iter().product::<usize>() * datatype.size_of();
+    let start = data_start(header);
+    let needed = data_bytes(dims, datatype);
     let available = len.saturating_sub(start);
     if available < needed {
         let [nx, ny, nz] = dims;

@@ -13,6 +13,14 @@ use npyz::{DType, NpyFile, NpyHeader, Order, TypeChar, TypeStr, WriterBuilder};
 use crate::atomic::write_atomic;
 use crate::{Error, Result};
 
+/// The magic string that opens a `.npy` file.
+const MAGIC: &[u8] = b"\x93NUMPY";
+
+/// The deepest nesting of brackets read in a header: a numeric array's header nests 2 deep
+/// (`{'descr': '<f8', 'fortran_order': False, 'shape': (2, 3), }`), record dtypes a few more;
+/// the header parser of `npyz` takes a time exponential in the depth.
+pub const MAX_HEADER_DEPTH: usize = 8;
+
 /// An n-dimensional array: `data[i_0 · s_0 + … + i_{k−1} · s_{k−1}]` holds element
 /// `(i_0, …, i_{k−1})` with C-order strides `s_j = shape[j+1] · … · shape[k−1]`;
 /// `data.len()` is the product of `shape` (1 for a 0-dimensional array).
@@ -27,7 +35,7 @@ pub struct NpyArray {
 /// Reads a `.npy` file (see the module documentation for the accepted dtypes).
 ///
 /// Errors: [`Error::Io`] when the file cannot be read; [`Error::Format`] for a malformed header
-/// or an unsupported dtype; [`Error::Truncated`] for data shorter than the header declares,
+/// or an unsupported dtype; [`Error::Truncated`] for a header or data shorter than declared,
 /// [`Error::TrailingBytes`] for bytes after them (a `.npy` file ends with its data).
 pub fn read_npy(path: &Path) -> Result<NpyArray> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
@@ -71,8 +79,13 @@ fn element_count(shape: &[usize]) -> Option<usize> {
     shape.iter().try_fold(1usize, |n, &d| n.checked_mul(d))
 }
 
-fn parse_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
+/// Parses the bytes of a `.npy` file as [`read_npy`] does (`path` is only used in error
+/// messages).
+///
+/// Errors: as [`read_npy`], but for [`Error::Io`].
+pub fn parse_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
     let format_error = |message: String| Error::format(path, message);
+    check_header_text(bytes, path)?;
     let mut data_bytes = bytes;
     let header = NpyHeader::from_reader(&mut data_bytes)
         .map_err(|e| format_error(format!("invalid .npy header: {e}")))?;
@@ -121,6 +134,55 @@ fn parse_npy(bytes: &[u8], path: &Path) -> Result<NpyArray> {
         Order::Fortran => fortran_to_c(&shape, &values),
     };
     Ok(NpyArray { shape, data })
+}
+
+/// Checks what `npyz` trusts in the header of a file that opens with the magic string of a
+/// known version: that the declared header length lies in the file (`npyz` allocates it
+/// first), and that its text nests brackets at most [`MAX_HEADER_DEPTH`] deep. Anything else
+/// is left to `npyz`'s own errors.
+///
+/// Errors: [`Error::Truncated`] for a header longer than the file; [`Error::Format`] for a
+/// header nested too deep.
+fn check_header_text(bytes: &[u8], path: &Path) -> Result<()> {
+    let Some(rest) = bytes.strip_prefix(MAGIC) else {
+        return Ok(());
+    };
+    // Version (2 bytes), then the header length: u16 in version 1, u32 in versions 2 and 3.
+    let (length, start) = match (rest.first(), rest.get(2..6)) {
+        (Some(1), Some(b)) => (usize::from(u16::from_le_bytes([b[0], b[1]])), 10),
+        (Some(2 | 3), Some(b)) => (u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize, 12),
+        _ => return Ok(()),
+    };
+    let text = bytes
+        .get(start..)
+        .and_then(|b| b.get(..length))
+        .ok_or_else(|| Error::Truncated {
+            path: path.into(),
+            what: "the .npy header".into(),
+            needed: length as u64,
+            available: bytes.len().saturating_sub(start) as u64,
+        })?;
+    let depth = text
+        .iter()
+        .scan(0usize, |depth, b| {
+            match b {
+                b'(' | b'[' | b'{' => *depth += 1,
+                b')' | b']' | b'}' => *depth = depth.saturating_sub(1),
+                _ => {}
+            }
+            Some(*depth)
+        })
+        .max()
+        .unwrap_or(0);
+    if depth > MAX_HEADER_DEPTH {
+        return Err(Error::format(
+            path,
+            format!(
+                "the .npy header nests brackets {depth} deep (at most {MAX_HEADER_DEPTH} are read)"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The values of a numeric dtype, converted to `f64`.

@@ -1,0 +1,9 @@
+//! NIfTI-1 volumes (seeded with uncompressed `.nii` files).
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let path = std::path::Path::new("fuzz.nii");
+    let _ = medial_io::nifti_volume::parse_nifti(data.to_vec(), path);
+});
