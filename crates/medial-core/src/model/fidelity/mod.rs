@@ -31,7 +31,7 @@
 pub mod butterfly;
 
 use crate::model::template::MedialTemplate;
-use crate::{Error, Result, Vec3};
+use crate::Vec3;
 use butterfly::{ButterflySurface, LEVELS};
 use parry3d_f64::query::PointQueryWithLocation;
 use parry3d_f64::shape::{TriMesh as ParryMesh, TriMeshFlags};
@@ -97,43 +97,37 @@ pub struct BallFidelity {
 
 impl BallFidelity {
     /// Prepares the measurement for `template`'s structure.
-    ///
-    /// Errors: none for a valid template (its boundary is closed and oriented).
-    pub fn new(template: &MedialTemplate) -> Result<Self> {
+    pub fn new(template: &MedialTemplate) -> Self {
         let surface = ButterflySurface::new(
             template.boundary_count(),
             template.boundary_triangles(),
             LEVELS,
-        )?;
+        )
+        .expect("a template's boundary is closed and oriented, and so are its subdivisions");
         let atoms = (0..template.medial_count())
             .map(|m| (template.spokes(m).to_vec(), template.atom_landmark(m)))
             .collect();
-        Ok(Self {
+        Self {
             surface,
             landmarks: template.landmark_count(),
             atoms,
-        })
+        }
     }
 
-    /// The fidelity at landmarks `q` (boundary points, then medial points).
+    /// The fidelity at landmarks `q` (boundary points, then medial points). Landmarks that are
+    /// not all finite are reported, not refused: every distance is NaN and every medial point
+    /// counts as outside.
     ///
-    /// Errors: `ShapeMismatch` for a wrong number of points; `NonFinite` for a point that is
-    /// not finite.
-    pub fn measure(&self, q: &[Vec3]) -> Result<Fidelity> {
-        if q.len() != self.landmarks {
-            return Err(Error::ShapeMismatch {
-                what: "landmarks for the medial fidelity".into(),
-                expected: self.landmarks,
-                found: q.len(),
-            });
-        }
-        if let Some(i) = q.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-            return Err(Error::NonFinite(format!(
-                "landmark {i} is {:?}",
-                q[i].as_slice()
-            )));
-        }
-        let mesh = self.parry_mesh(q)?;
+    /// # Panics
+    /// If `q.len()` differs from the template's landmark count.
+    pub fn measure(&self, q: &[Vec3]) -> Fidelity {
+        assert_eq!(
+            q.len(),
+            self.landmarks,
+            "medial fidelity: one point per landmark"
+        );
+        let finite = q.iter().all(|p| p.iter().all(|c| c.is_finite()));
+        let mesh = finite.then(|| self.parry_mesh(q));
         let radius: Vec<f64> = self
             .atoms
             .iter()
@@ -142,7 +136,10 @@ impl BallFidelity {
         let (distance, inside): (Vec<f64>, Vec<bool>) = self
             .atoms
             .par_iter()
-            .map(|(_, m)| nearest(&mesh, &q[*m]))
+            .map(|(_, m)| match &mesh {
+                Some(mesh) => nearest(mesh, &q[*m]),
+                None => (f64::NAN, false),
+            })
             .unzip();
         let residual: Vec<f64> = distance
             .iter()
@@ -166,18 +163,18 @@ impl BallFidelity {
             sheet: group(false),
             edge: group(true),
         };
-        Ok(Fidelity {
+        Fidelity {
             radius,
             distance,
             residual,
             inside,
             pokes_out,
             summary,
-        })
+        }
     }
 
     /// The butterfly surface at `q` as a `parry3d` mesh with pseudo-normals (for the side).
-    fn parry_mesh(&self, q: &[Vec3]) -> Result<ParryMesh> {
+    fn parry_mesh(&self, q: &[Vec3]) -> ParryMesh {
         let vertices = self
             .surface
             .vertices(q)
@@ -190,9 +187,8 @@ impl BallFidelity {
             .iter()
             .map(|t| t.map(|i| i as u32))
             .collect();
-        ParryMesh::with_flags(vertices, triangles, TriMeshFlags::ORIENTED).map_err(|e| {
-            Error::InvalidMesh(format!("boundary surface for the medial fidelity: {e}"))
-        })
+        ParryMesh::with_flags(vertices, triangles, TriMeshFlags::ORIENTED)
+            .expect("a closed boundary has triangles")
     }
 }
 
@@ -273,11 +269,11 @@ mod tests {
     #[test]
     fn slab_has_exact_balls_and_a_moved_medial_point_pokes_out_by_its_offset() {
         let t = slab();
-        let meter = BallFidelity::new(&t).unwrap();
+        let meter = BallFidelity::new(&t);
         let m = centre_atom();
         assert_eq!(t.medial_points()[m], Vec3::new(4.0, 4.0, 0.0));
         assert_eq!(t.spokes(m).len(), 2);
-        let f = meter.measure(t.landmarks()).unwrap();
+        let f = meter.measure(t.landmarks());
         assert_relative_eq!(f.radius[m], R, epsilon = 1e-14);
         assert_relative_eq!(f.distance[m], R, epsilon = 1e-12);
         assert!(f.residual[m] < 1e-12 && f.inside[m] && !f.pokes_out[m]);
@@ -290,7 +286,7 @@ mod tests {
         for (delta, pokes) in [(0.01, false), (0.2 * R, true)] {
             let mut q = t.landmarks().to_vec();
             q[t.atom_landmark(m)].z += delta;
-            let f = meter.measure(&q).unwrap();
+            let f = meter.measure(&q);
             assert_relative_eq!(f.radius[m], R, epsilon = 1e-14);
             assert_relative_eq!(f.residual[m], delta / R, epsilon = 1e-12);
             assert_eq!(f.pokes_out[m], pokes, "δ = {delta}");
@@ -299,7 +295,7 @@ mod tests {
         // Out of the slab: outside, and poking out.
         let mut q = t.landmarks().to_vec();
         q[t.atom_landmark(m)].z += 3.0 * R;
-        let f = meter.measure(&q).unwrap();
+        let f = meter.measure(&q);
         assert!(!f.inside[m] && f.pokes_out[m]);
         assert_relative_eq!(f.distance[m], 2.0 * R, epsilon = 1e-12);
         assert_eq!(
@@ -314,7 +310,7 @@ mod tests {
     }
 
     #[test]
-    fn summaries_are_means_and_maxima_and_bad_input_is_refused() {
+    fn summaries_are_means_and_maxima_and_non_finite_landmarks_are_reported() {
         let g = GroupFidelity::of([(0.1, false), (0.3, true)].into_iter());
         assert_eq!(g.atoms, 2);
         assert_relative_eq!(g.mean_residual, 0.2);
@@ -324,13 +320,13 @@ mod tests {
         let g = GroupFidelity::of(std::iter::empty());
         assert!(g.atoms == 0 && g.mean_residual.is_nan());
         let t = slab();
-        let meter = BallFidelity::new(&t).unwrap();
-        let m = meter.measure(&t.landmarks()[1..]).unwrap_err().to_string();
-        assert!(m.contains("expected") && m.contains("found"), "{m}");
+        let meter = BallFidelity::new(&t);
         let mut q = t.landmarks().to_vec();
         q[3].x = f64::INFINITY;
-        let m = meter.measure(&q).unwrap_err().to_string();
-        assert!(m.contains("landmark 3"), "{m}");
+        let f = meter.measure(&q);
+        assert!(f.distance.iter().all(|d| d.is_nan()) && f.pokes_out.iter().all(|&p| p));
+        assert!(f.summary.sheet.mean_residual.is_nan());
+        assert_eq!(f.summary.sheet.poking_out, f.summary.sheet.atoms);
     }
 
     /// The slab with every medial point moved by a fixed pseudo-random offset of up to 0.3 R,
@@ -358,12 +354,12 @@ mod tests {
         ) {
             prop_assume!(Vec3::from(axis).norm() > 0.1);
             let t = slab();
-            let meter = BallFidelity::new(&t).unwrap();
+            let meter = BallFidelity::new(&t);
             let q = perturbed(&t);
             let rotation = Rotation3::from_axis_angle(&Unit::new_normalize(Vec3::from(axis)), angle);
             let scale = log_scale.exp();
             let moved: Vec<Vec3> = q.iter().map(|p| scale * (rotation * p) + Vec3::from(shift)).collect();
-            let (a, b) = (meter.measure(&q).unwrap(), meter.measure(&moved).unwrap());
+            let (a, b) = (meter.measure(&q), meter.measure(&moved));
             for m in 0..t.medial_count() {
                 prop_assert!((a.residual[m] - b.residual[m]).abs() < 1e-9, "atom {m}: {} vs {}", a.residual[m], b.residual[m]);
                 prop_assert!((a.distance[m] * scale - b.distance[m]).abs() < 1e-9 * scale);
