@@ -36,6 +36,10 @@ pub enum CliError {
     /// written, marked as such. Exit code 4.
     #[error("{0}")]
     ConstraintsNotMet(String),
+    /// `medial check`: the medial points are not the centres of inscribed balls (the sheet
+    /// atoms' mean residual passes `--max-residual`); the figures were printed. Exit code 5.
+    #[error("{0}")]
+    NotMedial(String),
     /// The memory estimate of a run passes the limit (`--max-memory`).
     #[error(
         "{what} would need {estimate}, more than the memory limit of {} (--max-memory GIB; \
@@ -107,12 +111,13 @@ pub enum CliError {
 
 impl CliError {
     /// The process exit code: 3 for an unsound fit, 4 for a fit whose constraints were not
-    /// met (both with results written), 1 for every other failure (2, a wrong command line,
-    /// is clap's).
+    /// met (both with results written), 5 for `medial check` finding a model not medial, 1 for
+    /// every other failure (2, a wrong command line, is clap's).
     pub fn exit_code(&self) -> u8 {
         match self {
             CliError::Unsound(_) => 3,
             CliError::ConstraintsNotMet(_) => 4,
+            CliError::NotMedial(_) => 5,
             CliError::Usage(_) => 2,
             _ => 1,
         }

@@ -1,10 +1,14 @@
 //! The medial figures of SPEC §6 at every time point of the fitted flow: `time_points.csv`
 //! (one row per time point, for a spreadsheet or `numpy.genfromtxt`) and their worst values
-//! over the flow for `summary.json`. Medial templates only: a plain mesh has no spokes.
+//! over the flow for `summary.json`; among them the inscribed-ball fidelity
+//! ([`medial_core::model::fidelity`]), as `medial check` prints it too. Medial templates only:
+//! a plain mesh has no spokes.
 
 use crate::error::CliError;
 use medial_core::flow::Trajectory;
-use medial_core::model::{MedialConstraints, Model};
+use medial_core::model::fidelity::{FidelitySummary, GroupFidelity};
+use medial_core::model::{BallFidelity, MedialConstraints, Model};
+use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
 
@@ -25,6 +29,77 @@ pub struct TimePoint {
     pub max_abs_constraint_mm2: f64,
     /// Smallest and largest local thickness (2 × mean spoke length of an atom), mm.
     pub thickness_range_mm: [f64; 2],
+    /// The inscribed-ball fidelity of sheet and free-edge atoms.
+    pub fidelity: FidelitySummary,
+}
+
+/// The inscribed-ball fidelity of a group of atoms, for JSON: at one time point, or the worst of
+/// each figure over time points.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct GroupFigures {
+    /// Atoms in the group.
+    pub atoms: usize,
+    /// Mean residual `|d − r| / r`, %.
+    pub mean_residual_pct: f64,
+    /// Largest residual, %.
+    pub max_residual_pct: f64,
+    /// Atoms whose ball pokes out of the boundary.
+    pub poking_out: usize,
+}
+
+/// The inscribed-ball fidelity of sheet atoms (two or three spokes) and free-edge atoms (one).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct BallFigures {
+    /// Sheet and seam atoms.
+    pub sheet: GroupFigures,
+    /// Free-edge atoms.
+    pub edge: GroupFigures,
+}
+
+impl GroupFigures {
+    fn of(g: &GroupFidelity) -> Self {
+        Self {
+            atoms: g.atoms,
+            mean_residual_pct: 100.0 * g.mean_residual,
+            max_residual_pct: 100.0 * g.max_residual,
+            poking_out: g.poking_out,
+        }
+    }
+
+    /// The worse of each figure (NaN wins, as a figure that cannot be trusted).
+    fn worse(self, other: Self) -> Self {
+        let max = |a: f64, b: f64| {
+            if a.is_nan() || b.is_nan() {
+                f64::NAN
+            } else {
+                a.max(b)
+            }
+        };
+        Self {
+            atoms: self.atoms,
+            mean_residual_pct: max(self.mean_residual_pct, other.mean_residual_pct),
+            max_residual_pct: max(self.max_residual_pct, other.max_residual_pct),
+            poking_out: self.poking_out.max(other.poking_out),
+        }
+    }
+}
+
+impl BallFigures {
+    /// The figures of one configuration.
+    pub fn of(f: &FidelitySummary) -> Self {
+        Self {
+            sheet: GroupFigures::of(&f.sheet),
+            edge: GroupFigures::of(&f.edge),
+        }
+    }
+
+    /// The worse of each figure of the two.
+    pub fn worse(self, other: Self) -> Self {
+        Self {
+            sheet: self.sheet.worse(other.sheet),
+            edge: self.edge.worse(other.edge),
+        }
+    }
 }
 
 /// The worst figures over time points `1 … N` (time point 0, the template, is not optimised).
@@ -38,6 +113,8 @@ pub struct OverTime {
     pub max_abs_constraint_mm2: f64,
     /// Smallest local thickness at any time point, mm.
     pub min_thickness_mm: f64,
+    /// The worst inscribed-ball figures at any time point.
+    pub ball_fidelity: BallFigures,
 }
 
 /// The figures at every time point of `trajectory`; empty for a plain mesh.
@@ -46,14 +123,16 @@ pub fn time_points(model: &Model, trajectory: &Trajectory) -> Vec<TimePoint> {
         return Vec::new();
     };
     let constraints = MedialConstraints::new(template);
+    let fidelity = BallFidelity::new(template);
     let last = trajectory.time_points() - 1;
-    let mut values = vec![0.0; constraints.len()];
     (0..=last)
+        .into_par_iter()
         .map(|n| {
             let q = trajectory.positions(n);
             let m = model
                 .metrics(q)
                 .expect("a medial template has spoke metrics");
+            let mut values = vec![0.0; constraints.len()];
             constraints.evaluate(q, &mut values);
             TimePoint {
                 index: n,
@@ -68,6 +147,7 @@ pub fn time_points(model: &Model, trajectory: &Trajectory) -> Vec<TimePoint> {
                     .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], &x| {
                         [lo.min(x), hi.max(x)]
                     }),
+                fidelity: fidelity.measure(q).summary,
             }
         })
         .collect()
@@ -82,6 +162,10 @@ pub fn over_time(points: &[TimePoint]) -> Option<OverTime> {
         max_spoke_mismatch_pct: max(|p| p.max_spoke_mismatch_pct),
         max_abs_constraint_mm2: max(|p| p.max_abs_constraint_mm2),
         min_thickness_mm: -max(|p| -p.thickness_range_mm[0]),
+        ball_fidelity: flow
+            .iter()
+            .map(|p| BallFigures::of(&p.fidelity))
+            .reduce(BallFigures::worse)?,
     })
 }
 
@@ -91,12 +175,15 @@ pub fn write_csv(path: &Path, points: &[TimePoint]) -> Result<(), CliError> {
         writeln!(
             w,
             "time_point,t,max_spoke_normal_deg,mean_spoke_normal_deg,max_spoke_mismatch_pct,\
-             max_abs_constraint_mm2,min_thickness_mm,max_thickness_mm"
+             max_abs_constraint_mm2,min_thickness_mm,max_thickness_mm,\
+             ball_residual_sheet_mean_pct,ball_residual_sheet_max_pct,balls_poking_out_sheet,\
+             ball_residual_edge_mean_pct,ball_residual_edge_max_pct,balls_poking_out_edge"
         )?;
         for p in points {
+            let ball = BallFigures::of(&p.fidelity);
             writeln!(
                 w,
-                "{},{},{:e},{:e},{:e},{:e},{:e},{:e}",
+                "{},{},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{},{:e},{:e},{}",
                 p.index,
                 p.t,
                 p.max_spoke_normal_deg,
@@ -104,7 +191,13 @@ pub fn write_csv(path: &Path, points: &[TimePoint]) -> Result<(), CliError> {
                 p.max_spoke_mismatch_pct,
                 p.max_abs_constraint_mm2,
                 p.thickness_range_mm[0],
-                p.thickness_range_mm[1]
+                p.thickness_range_mm[1],
+                ball.sheet.mean_residual_pct,
+                ball.sheet.max_residual_pct,
+                ball.sheet.poking_out,
+                ball.edge.mean_residual_pct,
+                ball.edge.max_residual_pct,
+                ball.edge.poking_out,
             )?;
         }
         Ok(())

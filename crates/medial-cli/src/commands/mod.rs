@@ -1,7 +1,9 @@
 //! The commands of `medial`, one module each: [`fit`] and [`eval`] run a TOML schedule;
 //! [`inflate`], [`project`] and [`synth`] build templates and synthetic cases; [`rasterize`]
-//! turns a closed mesh into a mask; [`report`] writes the views of a fit folder again.
+//! turns a closed mesh into a mask; [`report`] writes the views of a fit folder again;
+//! [`check`] measures whether the medial points stay the centres of inscribed balls.
 
+mod check;
 mod eval;
 mod fit;
 mod inflate;
@@ -71,6 +73,10 @@ pub enum Command {
     /// Write report.html, flow.glb and the ParaView series (flow/*.vtk.series) of a fit folder
     /// again from its files.
     Report(report::ReportArgs),
+    /// Measure whether the medial points of a template, or of a fit at every time point, stay
+    /// the centres of balls inscribed in the boundary (residual |d − r| / r, balls poking out);
+    /// prints JSON, exits with code 5 past --max-residual.
+    Check(check::CheckArgs),
 }
 
 /// Parses `--mu`: a positive, finite penalty weight.
@@ -136,6 +142,7 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
         Command::Synth(args) => synth::run(&args)?,
         Command::Rasterize(args) => rasterize::run(&args)?,
         Command::Report(args) => report::run(&args)?,
+        Command::Check(args) => check::run(&args)?,
     }
     Ok(())
 }

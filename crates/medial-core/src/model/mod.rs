@@ -1,17 +1,20 @@
 //! The medial model (SPEC §2–§4, §6): a cmrep template of boundary points with spokes to
 //! medial atoms ([`template`]), the Loop tangents of its boundary ([`loop_tangent`]), the medial
 //! constraints that keep it medial under a flow ([`constraints`]), how well a configuration
-//! of its landmarks satisfies them ([`metrics`]), and the [`Model`] a fit deforms: a medial
-//! template or a plain mesh ([`deformable`]).
+//! of its landmarks satisfies them ([`metrics`]), whether its medial points stay the centres of
+//! inscribed balls ([`fidelity`]), and the [`Model`] a fit deforms: a medial template or a plain
+//! mesh ([`deformable`]).
 
 pub mod constraints;
 pub mod deformable;
+pub mod fidelity;
 pub mod loop_tangent;
 pub mod metrics;
 pub mod template;
 
 pub use constraints::{ConstraintUnits, MedialConstraints};
 pub use deformable::Model;
+pub use fidelity::{BallFidelity, Fidelity};
 pub use loop_tangent::LoopTangents;
 pub use metrics::SpokeMetrics;
 pub use template::MedialTemplate;
