@@ -160,7 +160,7 @@ pub enum StageStart {
 /// How [`run_stage`] ended.
 pub enum StageRun {
     /// The schedule ran its course (or ended unsound).
-    Done(StageOutcome),
+    Done(Box<StageOutcome>),
     /// Paused after an accepted iterate: everything needed to go on.
     Paused(Box<StageCheckpoint>),
 }
@@ -359,7 +359,7 @@ pub fn run_stage(
         outcome.stops.push(min.stop);
         if outcome.unsound.is_some() || al_iteration + 1 == al_iterations {
             at.outcome.momenta = min.momenta;
-            return Ok(StageRun::Done(at.outcome));
+            return Ok(StageRun::Done(Box::new(at.outcome)));
         }
         let values = objective.constraint_values(&min.momenta)?;
         at.lambda

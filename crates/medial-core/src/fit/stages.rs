@@ -160,7 +160,7 @@ pub fn run_stages_resumable(
             },
         )?;
         let outcome = match run {
-            StageRun::Done(outcome) => outcome,
+            StageRun::Done(outcome) => *outcome,
             StageRun::Paused(current) => {
                 return Ok(FitRun::Paused(Box::new(Checkpoint {
                     completed: outcomes,
@@ -318,16 +318,20 @@ mod tests {
         back
     }
 
-    fn bits(outcomes: &[StageOutcome]) -> Vec<(Vec<u64>, Vec<u64>, usize, usize, String)> {
+    /// Everything of each outcome, every number to the bit.
+    fn bits(outcomes: &[StageOutcome]) -> Vec<String> {
+        let to_bits = |x: &[f64]| x.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         outcomes
             .iter()
             .map(|o| {
-                (
-                    o.momenta.iter().map(|x| x.to_bits()).collect(),
-                    o.lambda.iter().map(|x| x.to_bits()).collect(),
+                format!(
+                    "{:?} {:?} {} {} {:?} {:?}",
+                    to_bits(&o.momenta),
+                    to_bits(&o.lambda),
                     o.iterations,
                     o.evaluations,
-                    format!("{:?} {:?}", o.stops, o.evaluation),
+                    o.stops,
+                    o.evaluation
                 )
             })
             .collect()
