@@ -2,6 +2,7 @@
 //! `main` prints it and exits with a non-zero code.
 
 use crate::memory::{self, Estimate};
+use crate::signals::Signal;
 use medial_core::mesh::Bounds;
 use std::path::{Path, PathBuf};
 
@@ -99,6 +100,24 @@ pub enum CliError {
         /// The plotting library's message.
         message: String,
     },
+    /// A checkpoint cannot be resumed (missing, damaged, of another version, or written for
+    /// another config or other input files).
+    #[error("{}: {message}", path.display())]
+    Checkpoint {
+        /// The checkpoint file.
+        path: PathBuf,
+        /// Why it cannot be resumed.
+        message: String,
+    },
+    /// SIGINT or SIGTERM stopped the fit; its checkpoint and results so far were written.
+    /// Exit code `128 + the signal's number` (130, 143).
+    #[error("{message}")]
+    Interrupted {
+        /// The signal.
+        signal: Signal,
+        /// Where it stopped and what was written.
+        message: String,
+    },
     /// An operating-system error outside the file layer (creating the output folder).
     #[error("{}: {source}", path.display())]
     Io {
@@ -111,13 +130,15 @@ pub enum CliError {
 
 impl CliError {
     /// The process exit code: 3 for an unsound fit, 4 for a fit whose constraints were not
-    /// met (both with results written), 5 for `medial check` finding a model not medial, 1 for
-    /// every other failure (2, a wrong command line, is clap's).
+    /// met (both with results written), 5 for `medial check` finding a model not medial,
+    /// 130 / 143 for a fit stopped by SIGINT / SIGTERM (with its checkpoint), 1 for every other
+    /// failure (2, a wrong command line, is clap's).
     pub fn exit_code(&self) -> u8 {
         match self {
             CliError::Unsound(_) => 3,
             CliError::ConstraintsNotMet(_) => 4,
             CliError::NotMedial(_) => 5,
+            CliError::Interrupted { signal, .. } => signal.exit_code(),
             CliError::Usage(_) => 2,
             _ => 1,
         }

@@ -3,8 +3,10 @@
 //!
 //! Data flows one way: [`config`] reads a TOML schedule, [`stage`] assembles what the engine runs,
 //! the [`commands`] run it, and [`summary`], [`progress`], [`time_points`] and [`output`] write
-//! what a user reads.
+//! what a user reads, as one set of files ([`results`]). A fit stopped by a signal
+//! ([`signals`]) leaves a [`checkpoint`] to resume from.
 
+mod checkpoint;
 mod commands;
 pub mod config;
 mod error;
@@ -13,6 +15,8 @@ mod output;
 mod plan;
 mod progress;
 mod report;
+mod results;
+mod signals;
 mod stage;
 mod summary;
 mod time_points;

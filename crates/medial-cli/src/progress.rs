@@ -2,6 +2,7 @@
 //! spinner when stderr is a terminal, plain log lines every few seconds otherwise).
 
 use crate::error::CliError;
+use crate::results::ResultSet;
 use crate::summary::Figures;
 use std::io::{BufWriter, IsTerminal, Write};
 use std::path::{Path, PathBuf};
@@ -27,36 +28,43 @@ pub struct LogRow<'a> {
     pub seconds: f64,
 }
 
-/// `log.csv`, written to `log.csv.part` as the fit goes and renamed when it is complete.
+/// `log.csv`, written to `log.csv.part` in the result folder as the fit goes (flushed row by
+/// row, for `tail -f`) and moved into the set of results when the fit ends
+/// ([`Log::finish`]); removed if the fit fails before. It keeps its text for checkpoints.
 pub struct Log {
     out: BufWriter<std::fs::File>,
     part: PathBuf,
-    path: PathBuf,
+    text: String,
+    finished: bool,
 }
 
 const LOG_HEADER: &str = "stage,al_iteration,iteration,evaluations,mu,total,kinetic,data,penalty,max_abs_constraint,max_spoke_normal_deg,max_spoke_mismatch_pct,grad_norm,seconds,dice";
 
 impl Log {
-    /// Starts `path` (as `path.part`).
-    pub fn create(path: &Path) -> Result<Self, CliError> {
+    /// Starts `path` (as `path.part`) with `earlier`, the log of a checkpoint up to it, or
+    /// with the header when `earlier` is empty.
+    pub fn create(path: &Path, earlier: &str) -> Result<Self, CliError> {
         let part = path.with_extension("csv.part");
         let file = std::fs::File::create(&part).map_err(|e| CliError::io(&part, e))?;
-        let mut out = BufWriter::new(file);
-        writeln!(out, "{LOG_HEADER}").map_err(|e| CliError::io(&part, e))?;
-        Ok(Self {
-            out,
+        let mut log = Self {
+            out: BufWriter::new(file),
             part,
-            path: path.into(),
-        })
+            text: String::new(),
+            finished: false,
+        };
+        match earlier {
+            "" => log.append(&format!("{LOG_HEADER}\n"))?,
+            text => log.append(text)?,
+        }
+        Ok(log)
     }
 
     /// Appends a row (flushed, so that a running fit can be watched).
     pub fn row(&mut self, r: &LogRow<'_>) -> Result<(), CliError> {
         let f = r.figures;
         let opt = |x: Option<f64>| x.map(|v| format!("{v:.9e}")).unwrap_or_default();
-        writeln!(
-            self.out,
-            "{},{},{},{},{:e},{:.12e},{:.9e},{:.9e},{:.9e},{:.6e},{},{},{:.6e},{:.3},{}",
+        let line = format!(
+            "{},{},{},{},{:e},{:.12e},{:.9e},{:.9e},{:.9e},{:.6e},{},{},{:.6e},{:.3},{}\n",
             csv_field(r.stage),
             r.al_iteration,
             r.iteration,
@@ -72,19 +80,42 @@ impl Log {
             r.grad_norm,
             r.seconds,
             opt(f.dice),
-        )
-        .and_then(|_| self.out.flush())
-        .map_err(|e| CliError::io(&self.part, e))
+        );
+        self.append(&line)
     }
 
-    /// Completes the log: renames `log.csv.part` to `log.csv`.
-    pub fn finish(mut self) -> Result<(), CliError> {
+    fn append(&mut self, text: &str) -> Result<(), CliError> {
+        self.text.push_str(text);
+        self.out
+            .write_all(text.as_bytes())
+            .and_then(|_| self.out.flush())
+            .map_err(|e| CliError::io(&self.part, e))
+    }
+
+    /// Everything written so far, header included.
+    pub fn text(&self) -> &str {
+        &self.text
+    }
+
+    /// Completes the log: syncs `log.csv.part` and moves it into `set` as `log.csv`.
+    pub fn finish(mut self, set: &mut ResultSet) -> Result<(), CliError> {
         self.out.flush().map_err(|e| CliError::io(&self.part, e))?;
         self.out
             .get_ref()
             .sync_all()
             .map_err(|e| CliError::io(&self.part, e))?;
-        std::fs::rename(&self.part, &self.path).map_err(|e| CliError::io(&self.path, e))
+        set.adopt(&self.part, "log.csv")?;
+        self.finished = true;
+        Ok(())
+    }
+}
+
+impl Drop for Log {
+    /// A log that was not finished goes with its fit (best effort).
+    fn drop(&mut self) {
+        if !self.finished {
+            let _ = std::fs::remove_file(&self.part);
+        }
     }
 }
 

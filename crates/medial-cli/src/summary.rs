@@ -111,6 +111,10 @@ pub enum Status {
     /// A stage ended at an unsound iterate (folded, diverged, not finite); the results are
     /// those of the last sound iterate and later stages did not run (exit code 3).
     Unsound,
+    /// SIGINT or SIGTERM stopped the fit after an accepted iterate: the results are those of
+    /// that iterate, the stage in progress is partial and `checkpoint.bin` resumes the fit
+    /// (`--resume`; exit code 130 or 143).
+    Interrupted,
 }
 
 /// `summary.json`.
@@ -147,4 +151,7 @@ pub struct Summary {
     pub over_time: Option<OverTime>,
     /// Each stage.
     pub stages: Vec<StageSummary>,
+    /// The other files of this set of results (paths relative to the folder, sorted): all in
+    /// place once `summary.json` is ([`crate::results`]).
+    pub files: Vec<String>,
 }

@@ -1,5 +1,7 @@
-//! `medial fit`: runs the stages of a config (the engine's [`run_stages`]) and writes the results.
+//! `medial fit`: runs the stages of a config (the engine's [`run_stages_resumable`]), pausing
+//! for checkpoints and signals, and writes the results as one set.
 
+use crate::checkpoint::{self, Fingerprint, Saved};
 use crate::config::StageConfig;
 use crate::config::{AttachmentKind, Config};
 use crate::error::CliError;
@@ -7,13 +9,16 @@ use crate::output::model_error;
 use crate::output::{write_json, write_options, write_text};
 use crate::plan::{plain_sigma, Geometry, Target};
 use crate::progress::{Log, LogRow, Progress};
-use crate::stage::{self, flow_of};
+use crate::results::{create_dir, ResultSet};
+use crate::signals::{Signal, Signals};
+use crate::stage::{self, flow_of, Prepared};
 use crate::summary::{Figures, StageSummary, Status, Summary};
 use crate::time_points::{self, time_points};
 use medial_core::build::project::{project, ConstraintFigures, ProjectOptions};
 use medial_core::fit::{
-    affine_between, align_affine, align_similarity, anisotropy, run_stages, similarity_between,
-    ConstraintSet, FitEvent, Guard, PlannedStage, Stage, StageOutcome,
+    affine_between, align_affine, align_similarity, anisotropy, run_stages_resumable,
+    similarity_between, Checkpoint, ConstraintSet, FitEvent, FitRun, Guard, PlannedStage, Stage,
+    StageOutcome,
 };
 use medial_core::flow::{Flow, Trajectory};
 use medial_core::image::rasterize::{grid_around, rasterize};
@@ -28,7 +33,7 @@ use medial_io::model::{boundary_polydata, medial_polydata};
 use medial_io::vtk;
 use nalgebra::Matrix4;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// The inputs of `medial fit` given as flags: without a config they choose an automatic
 /// schedule ([`crate::plan::FitPlan::automatic`]); with one they replace its template and
@@ -387,6 +392,10 @@ pub struct FitOptions {
     pub threads: usize,
     /// No progress display.
     pub quiet: bool,
+    /// Write a checkpoint this often (wall-clock time) without stopping.
+    pub checkpoint_every: Option<Duration>,
+    /// Continue from the checkpoint in `out` instead of starting afresh.
+    pub resume: bool,
 }
 
 /// The comment lines of the resolved `config.toml` a fit writes.
@@ -394,9 +403,11 @@ const RESOLVED_HEADER: &str = "# The config of this fit as it ran, every setting
 (paths absolute or as given).\n# `medial fit config.toml --out DIR` runs it again to the same \
 bits.\n";
 
-/// Runs `config` and writes everything into `options.out`. A fit that ends at an unsound
-/// iterate, or with its constraints above their tolerance, writes its results (marked in
-/// `summary.json`'s `status`) and then returns the error that says so.
+/// Runs `config` (or, with [`FitOptions::resume`], continues it from the checkpoint in
+/// `options.out`) and writes its results into `options.out` as one set ([`ResultSet`]). A fit
+/// that ends at an unsound iterate, or with its constraints above their tolerance, writes its
+/// results (marked in `summary.json`'s `status`) and then returns the error that says so; so
+/// does a fit stopped by SIGINT or SIGTERM, which also writes its checkpoint.
 pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
     let model = medial_io::model::read_model(&config.model.template)?;
     // Constrained and Dice stages rely on the medial points staying inside (Dice samples the
@@ -427,86 +438,340 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
             lbfgs: p.lbfgs,
         })
         .collect();
-    create_dir(&options.out.join("flow"))?;
-    write_text(
-        &options.out.join("config.toml"),
-        &config.to_toml(RESOLVED_HEADER)?,
-    )?;
-    let mut log = Log::create(&options.out.join("log.csv"))?;
-    let mut progress = Progress::new(options.quiet);
-    let start = Instant::now();
-    let mut stage_start = start;
-    let mut stage_seconds = Vec::with_capacity(planned.len());
-    let mut log_error = None;
-    let outcomes = run_stages(&planned, |event| match event {
-        FitEvent::Iteration { stage, progress: p } => {
-            let (name, prepared) = (&config.stages[stage].name, &prepared[stage]);
-            let e = p.report.evaluation;
-            let figures = prepared.figures_at(&model, e, &e.final_positions);
-            let row = LogRow {
-                stage: name,
-                al_iteration: p.al_iteration,
-                iteration: p.report.iteration,
-                evaluations: p.report.evaluations,
-                mu: p.mu,
-                figures: &figures,
-                grad_norm: p.report.gradient_norm,
-                seconds: start.elapsed().as_secs_f64(),
-            };
-            progress.update(&row);
-            if let Err(e) = log.row(&row) {
-                log_error.get_or_insert(e);
+    let fit = Fit {
+        config,
+        options,
+        model: &model,
+        flow: &flow,
+        prepared: &prepared,
+        planned: &planned,
+    };
+    let (resumed, fingerprint) = match options.resume {
+        true => {
+            let fingerprint = Fingerprint::of(config)?;
+            let path = options.out.join(checkpoint::FILE);
+            (
+                Some(Saved::read_for(&path, &fingerprint)?),
+                Some(fingerprint),
+            )
+        }
+        false => (None, None),
+    };
+    let mut set = ResultSet::begin(&options.out)?;
+    write_text(&set.file("config.toml")?, &config.to_toml(RESOLVED_HEADER)?)?;
+    let ended = fit.optimise(resumed, fingerprint)?;
+    fit.write_set(set, ended)
+}
+
+/// What a fit runs: its config and options, the model and its flow, the prepared stages and
+/// the plan the engine runs.
+struct Fit<'a> {
+    config: &'a Config,
+    options: &'a FitOptions,
+    model: &'a Model,
+    flow: &'a Flow,
+    prepared: &'a [Prepared],
+    planned: &'a [PlannedStage<'a>],
+}
+
+/// How the optimisation of a fit ended.
+struct Ended {
+    /// The outcome of every stage run (of an interrupted fit: the one in progress as it stood).
+    outcomes: Vec<StageOutcome>,
+    /// Wall-clock seconds of each of them.
+    stage_seconds: Vec<f64>,
+    /// Wall-clock seconds of the fit.
+    seconds: f64,
+    log: Log,
+    /// The signal that stopped the fit, and its checkpoint.
+    interrupted: Option<(Signal, Saved)>,
+}
+
+/// Wall-clock seconds since a start, after `before` seconds of earlier runs.
+struct Clock {
+    start: Instant,
+    before: f64,
+}
+
+impl Clock {
+    fn new(before: f64) -> Self {
+        Self {
+            start: Instant::now(),
+            before,
+        }
+    }
+
+    fn seconds(&self) -> f64 {
+        self.before + self.start.elapsed().as_secs_f64()
+    }
+}
+
+/// A fit as it runs: its log, its progress display and its clocks.
+struct Watch {
+    log: Log,
+    progress: Progress,
+    /// The fit.
+    clock: Clock,
+    /// The stage in progress.
+    stage_clock: Clock,
+    /// Seconds of each stage that ended.
+    stage_seconds: Vec<f64>,
+    /// The first failure to write the log.
+    error: Option<CliError>,
+}
+
+impl Watch {
+    /// Logs and shows an iteration; shows the end of a stage.
+    fn event(&mut self, fit: &Fit<'_>, event: FitEvent<'_>) {
+        match event {
+            FitEvent::Iteration { stage, progress: p } => {
+                let (name, prepared) = (&fit.config.stages[stage].name, &fit.prepared[stage]);
+                let e = p.report.evaluation;
+                let figures = prepared.figures_at(fit.model, e, &e.final_positions);
+                let row = LogRow {
+                    stage: name,
+                    al_iteration: p.al_iteration,
+                    iteration: p.report.iteration,
+                    evaluations: p.report.evaluations,
+                    mu: p.mu,
+                    figures: &figures,
+                    grad_norm: p.report.gradient_norm,
+                    seconds: self.clock.seconds(),
+                };
+                self.progress.update(&row);
+                if let Err(e) = self.log.row(&row) {
+                    self.error.get_or_insert(e);
+                }
+            }
+            FitEvent::StageEnd { stage, outcome } => {
+                let seconds = self.stage_clock.seconds();
+                let line = stage_line(&fit.config.stages[stage].name, outcome, seconds);
+                self.progress.println(&line);
+                self.stage_seconds.push(seconds);
+                self.stage_clock = Clock::new(0.0);
             }
         }
-        FitEvent::StageEnd { stage, outcome } => {
-            let seconds = stage_start.elapsed().as_secs_f64();
-            progress.println(&stage_line(&config.stages[stage].name, outcome, seconds));
-            stage_seconds.push(seconds);
-            stage_start = Instant::now();
+    }
+
+    /// The checkpoint file of the engine's `checkpoint`.
+    fn saved(&self, fingerprint: Fingerprint, checkpoint: Checkpoint) -> Saved {
+        let mut stage_seconds = self.stage_seconds.clone();
+        stage_seconds.push(self.stage_clock.seconds());
+        let log = self.log.text().to_owned();
+        Saved::new(
+            fingerprint,
+            log,
+            self.clock.seconds(),
+            stage_seconds,
+            checkpoint,
+        )
+    }
+
+    /// The end of the optimisation with `outcomes`.
+    fn ended(self, outcomes: Vec<StageOutcome>, interrupted: Option<(Signal, Saved)>) -> Ended {
+        self.progress.finish();
+        let stage_seconds = match &interrupted {
+            Some((_, saved)) => saved.stage_seconds.clone(),
+            None => self.stage_seconds,
+        };
+        Ended {
+            outcomes,
+            stage_seconds,
+            seconds: self.clock.seconds(),
+            log: self.log,
+            interrupted,
         }
-    })?;
-    if let Some(e) = log_error {
-        return Err(e);
     }
-    progress.finish();
-    let seconds = start.elapsed().as_secs_f64();
-    let mut stages = config
-        .stages
-        .iter()
-        .zip(&prepared)
-        .zip(outcomes.iter().zip(stage_seconds))
-        .map(|((cfg, p), (outcome, seconds))| {
-            let figures = p.end_figures(&model, &outcome.evaluation)?;
-            Ok(stage_summary(
-                cfg,
-                p.constraints.is_some(),
-                outcome,
-                seconds,
-                figures,
-            ))
-        })
-        .collect::<Result<Vec<_>, CliError>>()?;
-    let momenta = &outcomes.last().expect("a config has a stage").momenta;
-    let trajectory = flow.shoot(model.landmarks(), momenta)?;
-    write_results(config, options, &model, &flow, momenta, &trajectory)?;
-    if let Some(lambda) = outcomes.iter().rev().find(|o| !o.lambda.is_empty()) {
-        let per_time_point = lambda.lambda.len() / flow.time_steps();
-        medial_io::npy::write_npy(
-            &options.out.join("lambda.npy"),
-            &[flow.time_steps(), per_time_point],
-            &lambda.lambda,
+}
+
+impl Fit<'_> {
+    /// Runs the plan, from the start or from `resumed`, until it ends or a signal stops it;
+    /// writes a checkpoint every [`FitOptions::checkpoint_every`] on the way. `fingerprint`
+    /// is the config's, when already known.
+    fn optimise(
+        &self,
+        resumed: Option<Saved>,
+        mut fingerprint: Option<Fingerprint>,
+    ) -> Result<Ended, CliError> {
+        let out = &self.options.out;
+        let (log, seconds, mut stage_seconds, mut from) = match resumed {
+            Some(s) => (s.log, s.seconds, s.stage_seconds, Some(s.fit)),
+            None => (String::new(), 0.0, Vec::new(), None),
+        };
+        let progress = Progress::new(self.options.quiet);
+        if let Some(c) = &from {
+            progress.println(&format!(
+                "resuming stage '{}', AL iteration {}, iteration {} from {}",
+                self.config.stages[c.stage()].name,
+                c.al_iteration(),
+                c.iteration(),
+                out.join(checkpoint::FILE).display()
+            ));
+        }
+        let stage_so_far = stage_seconds.pop().unwrap_or(0.0);
+        let mut watch = Watch {
+            log: Log::create(&out.join("log.csv"), &log)?,
+            progress,
+            clock: Clock::new(seconds),
+            stage_clock: Clock::new(stage_so_far),
+            stage_seconds,
+            error: None,
+        };
+        let signals = Signals::catch()?;
+        loop {
+            let since = Instant::now();
+            let pause = || {
+                signals.received().is_some()
+                    || (self.options.checkpoint_every).is_some_and(|every| since.elapsed() >= every)
+            };
+            let run = run_stages_resumable(self.planned, from.take(), &pause, |event| {
+                watch.event(self, event)
+            })?;
+            if let Some(e) = watch.error.take() {
+                return Err(e);
+            }
+            let checkpoint = match run {
+                FitRun::Complete(outcomes) => return Ok(watch.ended(outcomes, None)),
+                FitRun::Paused(checkpoint) => *checkpoint,
+            };
+            let fingerprint = match &fingerprint {
+                Some(f) => f.clone(),
+                None => fingerprint.insert(Fingerprint::of(self.config)?).clone(),
+            };
+            let saved = watch.saved(fingerprint, checkpoint);
+            if let Some(signal) = signals.received() {
+                return Ok(watch.ended(saved.fit.outcomes(), Some((signal, saved))));
+            }
+            saved.write(&out.join(checkpoint::FILE))?;
+            from = Some(saved.fit);
+        }
+    }
+
+    /// Writes the results of `ended` as one set and moves it into the result folder; returns
+    /// the summary, or the error of a fit that did not end sound and within its tolerances.
+    fn write_set(&self, mut set: ResultSet, ended: Ended) -> Result<Summary, CliError> {
+        let Ended {
+            outcomes,
+            stage_seconds,
+            seconds,
+            log,
+            interrupted,
+        } = ended;
+        let mut stages = self.stage_summaries(&outcomes, stage_seconds)?;
+        let momenta = &outcomes.last().expect("a config has a stage").momenta;
+        let trajectory = self.flow.shoot(self.model.landmarks(), momenta)?;
+        write_results(
+            self.config,
+            &mut set,
+            self.model,
+            self.flow,
+            momenta,
+            &trajectory,
         )?;
+        if let Some(lambda) = outcomes.iter().rev().find(|o| !o.lambda.is_empty()) {
+            let per_time_point = lambda.lambda.len() / self.flow.time_steps();
+            medial_io::npy::write_npy(
+                &set.file("lambda.npy")?,
+                &[self.flow.time_steps(), per_time_point],
+                &lambda.lambda,
+            )?;
+        }
+        let points = time_points(self.model, &trajectory);
+        if !points.is_empty() {
+            time_points::write_csv(&set.file("time_points.csv")?, &points)?;
+        }
+        let last = stages.len() - 1;
+        let (status, failure) = match &interrupted {
+            Some((signal, saved)) => {
+                saved.write(&set.file(checkpoint::FILE)?)?;
+                let error =
+                    interrupted_error(*signal, &saved.fit, &stages[last].name, &self.options.out);
+                (Status::Interrupted, Some(error))
+            }
+            None => {
+                set.retire(checkpoint::FILE);
+                let (planned, cfg) = (&self.planned[last], &self.config.stages[last]);
+                judge_flow(&mut stages[last], planned, cfg, &trajectory, &points);
+                let status = status_of(&stages[last]);
+                (
+                    status,
+                    failure(status, &stages[last], cfg, &self.options.out),
+                )
+            }
+        };
+        let mut summary = self.summary(status, seconds, stages, &points);
+        log.finish(&mut set)?;
+        set.commit("summary.json", |path, files| {
+            summary.files = files;
+            write_json(path, &summary)
+        })?;
+        // The views are made from the committed set's files (as `medial report` does).
+        crate::report::write(&self.options.out)?;
+        match failure {
+            Some(e) => Err(e),
+            None => Ok(summary),
+        }
     }
-    let points = time_points(&model, &trajectory);
-    if !points.is_empty() {
-        time_points::write_csv(&options.out.join("time_points.csv"), &points)?;
+
+    /// The summary of every stage run, from its outcome and seconds.
+    fn stage_summaries(
+        &self,
+        outcomes: &[StageOutcome],
+        seconds: Vec<f64>,
+    ) -> Result<Vec<StageSummary>, CliError> {
+        self.config
+            .stages
+            .iter()
+            .zip(self.prepared)
+            .zip(outcomes.iter().zip(seconds))
+            .map(|((cfg, p), (outcome, seconds))| {
+                let figures = p.end_figures(self.model, &outcome.evaluation)?;
+                Ok(stage_summary(
+                    cfg,
+                    p.constraints.is_some(),
+                    outcome,
+                    seconds,
+                    figures,
+                ))
+            })
+            .collect()
     }
-    let last_planned = &planned[stages.len() - 1];
-    let last_config = &config.stages[stages.len() - 1];
-    let last = stages.last_mut().expect("a config has a stage");
-    judge_flow(last, last_planned, last_config, &trajectory, &points);
-    let last = stages.last().expect("a config has a stage");
-    let status = if last.unsound.is_some() {
+
+    /// `summary.json` of a fit that ended `status` (its `files` are the set's, filled in when
+    /// it is committed).
+    fn summary(
+        &self,
+        status: Status,
+        seconds: f64,
+        stages: Vec<StageSummary>,
+        points: &[time_points::TimePoint],
+    ) -> Summary {
+        let model = self.model;
+        Summary {
+            version: env!("CARGO_PKG_VERSION"),
+            status,
+            landmarks: model.landmarks().len(),
+            boundary_points: model.boundary_count(),
+            medial_atoms: model.medial_count(),
+            constraints_per_time_point: model
+                .medial()
+                .map_or(0, |t| MedialConstraints::new(t).len()),
+            time_steps: self.flow.time_steps(),
+            sigma: self.flow.kernel().sigma(),
+            threads: self.options.threads,
+            seconds,
+            evaluations: stages.iter().map(|s| s.evaluations).sum(),
+            final_figures: stages.last().expect("a config has a stage").figures.clone(),
+            over_time: time_points::over_time(points),
+            stages,
+            files: Vec::new(),
+        }
+    }
+}
+
+/// How a fit whose last stage run is `last` ended (not interrupted).
+fn status_of(last: &StageSummary) -> Status {
+    if last.unsound.is_some() {
         Status::Unsound
     } else if last.constraints_met == Some(false) {
         Status::ConstraintsNotMet
@@ -514,32 +779,24 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         Status::Converged
     } else {
         Status::Budget
-    };
-    let failure = failure(status, last, last_config, &options.out);
-    let summary = Summary {
-        version: env!("CARGO_PKG_VERSION"),
-        status,
-        landmarks: model.landmarks().len(),
-        boundary_points: model.boundary_count(),
-        medial_atoms: model.medial_count(),
-        constraints_per_time_point: model
-            .medial()
-            .map_or(0, |t| MedialConstraints::new(t).len()),
-        time_steps: flow.time_steps(),
-        sigma: flow.kernel().sigma(),
-        threads: options.threads,
-        seconds,
-        evaluations: stages.iter().map(|s| s.evaluations).sum(),
-        final_figures: last.figures.clone(),
-        over_time: time_points::over_time(&points),
-        stages,
-    };
-    write_json(&options.out.join("summary.json"), &summary)?;
-    log.finish()?;
-    crate::report::write(&options.out)?;
-    match failure {
-        Some(e) => Err(e),
-        None => Ok(summary),
+    }
+}
+
+/// The error of a fit that `signal` stopped at `checkpoint`, in the stage `stage`, its results
+/// and checkpoint written to `out`.
+fn interrupted_error(signal: Signal, checkpoint: &Checkpoint, stage: &str, out: &Path) -> CliError {
+    CliError::Interrupted {
+        signal,
+        message: format!(
+            "interrupted by {} in stage '{stage}', AL iteration {}, iteration {}: the checkpoint \
+             and the results of that iterate are in {} (status \"interrupted\"); `medial fit \
+             --resume {}` continues the fit",
+            signal.name(),
+            checkpoint.al_iteration(),
+            checkpoint.iteration(),
+            out.display(),
+            out.display()
+        ),
     }
 }
 
@@ -626,7 +883,7 @@ fn failure(status: Status, last: &StageSummary, cfg: &StageConfig, out: &Path) -
             cfg.tolerance_deg,
             cfg.tolerance_pct,
         ))),
-        Status::Converged | Status::Budget => None,
+        Status::Converged | Status::Budget | Status::Interrupted => None,
     }
 }
 
@@ -645,19 +902,18 @@ fn stage_line(name: &str, outcome: &StageOutcome, seconds: f64) -> String {
     )
 }
 
-/// `momenta.npy`, the model at every time point under `flow/`, and the fitted model.
+/// `momenta.npy`, the model at every time point under `flow/`, and the fitted model, into `set`.
 fn write_results(
     config: &Config,
-    options: &FitOptions,
+    set: &mut ResultSet,
     model: &Model,
     flow: &Flow,
     momenta: &[f64],
     trajectory: &Trajectory,
 ) -> Result<(), CliError> {
-    let out = &options.out;
     let k = model.landmarks().len();
     medial_io::npy::write_npy(
-        &out.join("momenta.npy"),
+        &set.file("momenta.npy")?,
         &[flow.time_steps(), k, 3],
         momenta,
     )?;
@@ -669,27 +925,23 @@ fn write_results(
         }
         let q = trajectory.positions(n);
         vtk::write_polydata(
-            &out.join(format!("flow/boundary_t{n:03}.vtk")),
+            &set.file(&format!("flow/boundary_t{n:03}.vtk"))?,
             &boundary_polydata(model, q),
             vtk_options,
         )?;
         if let Some(medial) = medial_polydata(model, q) {
             vtk::write_polydata(
-                &out.join(format!("flow/medial_t{n:03}.vtk")),
+                &set.file(&format!("flow/medial_t{n:03}.vtk"))?,
                 &medial,
                 vtk_options,
             )?;
         }
     }
     let q = trajectory.final_positions();
-    let fitted = out.join("fitted_template.vtk");
+    let fitted = set.file("fitted_template.vtk")?;
     match model.medial() {
         Some(t) => medial_io::cmrep::write_template(&fitted, &t.with_landmarks(q)?, vtk_options)?,
         None => vtk::write_polydata(&fitted, &boundary_polydata(model, q), vtk_options)?,
     }
     Ok(())
-}
-
-fn create_dir(path: &Path) -> Result<(), CliError> {
-    std::fs::create_dir_all(path).map_err(|e| CliError::io(path, e))
 }

@@ -17,6 +17,7 @@ use crate::error::CliError;
 use crate::output::print_json;
 use clap::Subcommand;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 /// The commands of `medial`.
 #[derive(Subcommand)]
@@ -24,17 +25,39 @@ pub enum Command {
     /// Run the stages of a TOML config, or without one an automatic schedule for --template
     /// and one of --image, --target, --surface; write config.toml (the resolved config),
     /// summary.json, log.csv, momenta.npy, lambda.npy, the flow of the model
-    /// (flow/boundary_tNNN.vtk, flow/medial_tNNN.vtk and their ParaView series
-    /// flow/boundary.vtk.series, flow/medial.vtk.series), flow.glb (the flow animated over t,
-    /// coloured by thickness), time_points.csv, fitted_template.vtk and report.html.
+    /// (flow/boundary_tNNN.vtk, flow/medial_tNNN.vtk), time_points.csv and fitted_template.vtk
+    /// as one set (summary.json, moved in last, lists the others), then the views of the set:
+    /// the ParaView series flow/boundary.vtk.series and flow/medial.vtk.series, flow.glb (the
+    /// flow animated over t, coloured by thickness) and report.html. SIGINT or SIGTERM stops
+    /// the fit after the current iteration with a checkpoint and the results so far (exit code
+    /// 130 / 143); --resume continues it to the same bits.
     Fit {
         /// The config file (TOML); relative paths in it are relative to its folder. With it,
         /// --template and the targets override the config's.
-        #[arg(value_name = "CONFIG.toml", required_unless_present = "template")]
+        #[arg(
+            value_name = "CONFIG.toml",
+            required_unless_present_any = ["template", "resume"]
+        )]
         config: Option<PathBuf>,
         /// Output folder (created if needed) [default with a config: "out" beside it].
-        #[arg(long, value_name = "DIR", required_unless_present = "config")]
+        #[arg(
+            long,
+            value_name = "DIR",
+            required_unless_present_any = ["config", "resume"],
+            conflicts_with = "resume"
+        )]
         out: Option<PathBuf>,
+        /// Continue the fit stopped in DIR (by SIGINT, SIGTERM or a kill after a periodic
+        /// checkpoint) from DIR/checkpoint.bin, writing into DIR; it ends with the same bits as
+        /// a fit never stopped. Without CONFIG.toml, DIR/config.toml is the config. Refused
+        /// when the config or an input file differs from the stopped fit's.
+        #[arg(long, value_name = "DIR")]
+        resume: Option<PathBuf>,
+        /// Also write DIR/checkpoint.bin every SECONDS of wall-clock time (after the iteration
+        /// in progress) without stopping, so that a fit killed at a batch system's wall-time
+        /// limit can be resumed with --resume.
+        #[arg(long, value_name = "SECONDS", value_parser = positive_seconds)]
+        checkpoint_every: Option<Duration>,
         #[command(flatten)]
         inputs: fit::Inputs,
     },
@@ -89,21 +112,36 @@ fn positive_mu(text: &str) -> Result<f64, String> {
     }
 }
 
+/// Parses `--checkpoint-every`: a positive, finite number of seconds.
+fn positive_seconds(text: &str) -> Result<Duration, String> {
+    match text.parse::<f64>() {
+        Ok(s) if s.is_finite() && s > 0.0 => Ok(Duration::from_secs_f64(s)),
+        _ => Err(format!(
+            "the checkpoint period must be a positive number of seconds, got '{text}'"
+        )),
+    }
+}
+
 /// Runs `command` with `threads` worker threads in use.
 pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError> {
     match command {
         Command::Fit {
             config,
             out,
+            resume,
+            checkpoint_every,
             inputs,
         } => {
-            let out = out
+            let out = resume
+                .clone()
+                .or(out)
                 .or_else(|| {
                     config
                         .as_ref()
                         .map(|c| c.parent().unwrap_or(Path::new(".")).join("out"))
                 })
-                .expect("clap requires --out without a config");
+                .expect("clap requires --out without a config or --resume");
+            let config = config.or_else(|| resume.as_ref().map(|dir| dir.join("config.toml")));
             let cfg = fit::resolve(config.as_deref(), &inputs, &out)?;
             let summary = fit::run(
                 &cfg,
@@ -111,6 +149,8 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
                     out: out.clone(),
                     threads,
                     quiet,
+                    checkpoint_every,
+                    resume: resume.is_some(),
                 },
             )?;
             print_json(&summary.final_figures)?;

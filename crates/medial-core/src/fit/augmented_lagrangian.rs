@@ -9,9 +9,13 @@
 use crate::attachment::Attachment;
 use crate::fit::guard::{self, Guard, Unsound};
 use crate::fit::objective::{ConstraintSet, Evaluation, Objective, Penalty};
-use crate::fit::optimize::{minimize, IterationReport, LbfgsOptions, Minimum, StopReason};
+use crate::fit::optimize::{
+    minimize, IterationReport, LbfgsOptions, Minimization, MinimizerCheckpoint, Minimum, Start,
+    StopReason,
+};
 use crate::flow::Flow;
 use crate::{Error, Result, Vec3};
+use serde::{Deserialize, Serialize};
 use std::cell::Cell;
 
 /// When `μ` grows between AL iterations.
@@ -100,7 +104,7 @@ pub struct Progress<'r> {
 }
 
 /// Where and why a stage ended at an unsound iterate.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct UnsoundStop {
     /// AL iteration (0-based).
     pub al_iteration: usize,
@@ -111,7 +115,7 @@ pub struct UnsoundStop {
 }
 
 /// The outcome of a stage.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct StageOutcome {
     /// Final momenta: the last sound iterate.
     pub momenta: Vec<f64>,
@@ -145,120 +149,257 @@ impl StageOutcome {
     }
 }
 
-/// Runs a stage from the momenta `start`: one minimisation without constraints, the AL
-/// schedule with them. Every accepted iterate is checked ([`guard::check`] against the
-/// objective at the stage's start); after a minimisation that needed a restart, `μ` grows by
-/// `√mu_factor` only. A minimisation that ends unsound ends the stage ([`StageOutcome::unsound`]).
+/// Where a stage starts.
+pub enum StageStart {
+    /// From these momenta, with `λ = 0` and `μ = μ₀`.
+    Momenta(Vec<f64>),
+    /// Where a paused stage stopped.
+    Resume(Box<StageCheckpoint>),
+}
+
+/// How [`run_stage`] ended.
+pub enum StageRun {
+    /// The schedule ran its course (or ended unsound).
+    Done(Box<StageOutcome>),
+    /// Paused after an accepted iterate: everything needed to go on.
+    Paused(Box<StageCheckpoint>),
+}
+
+/// A stage paused after an accepted L-BFGS iterate: its position in the AL schedule (AL
+/// iteration, `μ`, `λ`, the violation the `μ` rule compares with), the guard's reference value,
+/// the figures of its finished minimisations and the paused minimisation itself.
+#[derive(Clone, Serialize, Deserialize)]
+pub struct StageCheckpoint {
+    al_iteration: usize,
+    mu: f64,
+    lambda: Vec<f64>,
+    previous_violation: f64,
+    /// `E` at the start of the stage, the reference of the divergence guard.
+    guard_start: Option<f64>,
+    /// The finished minimisations of the stage (its `momenta` are not used).
+    done: StageOutcome,
+    minimizer: MinimizerCheckpoint,
+}
+
+impl StageCheckpoint {
+    /// AL iteration in progress (0-based).
+    pub fn al_iteration(&self) -> usize {
+        self.al_iteration
+    }
+
+    /// Accepted L-BFGS iterations of the minimisation in progress.
+    pub fn iteration(&self) -> usize {
+        self.minimizer.iterations()
+    }
+
+    /// The stage as it stands: the last accepted iterate, with the multipliers and `μ` of the
+    /// minimisation in progress (which give its figures again), the counters of every
+    /// minimisation so far, and [`StopReason::Paused`] as the stop of the one in progress.
+    pub fn partial(&self) -> StageOutcome {
+        let m = &self.minimizer;
+        let mut stops = self.done.stops.clone();
+        stops.push(StopReason::Paused);
+        StageOutcome {
+            momenta: m.momenta().to_vec(),
+            evaluation: m.evaluation().clone(),
+            iterations: self.done.iterations + m.iterations(),
+            evaluations: self.done.evaluations + m.evaluations(),
+            al_iterations: self.done.al_iterations + 1,
+            mu: self.mu,
+            lambda: self.lambda.clone(),
+            stops,
+            restarts: self.done.restarts + m.restarts(),
+            unsound: None,
+        }
+    }
+
+    /// The momenta of the last accepted iterate.
+    pub fn momenta(&self) -> &[f64] {
+        self.minimizer.momenta()
+    }
+}
+
+/// The AL schedule of a stage as it runs.
+struct Schedule {
+    al_iteration: usize,
+    mu: f64,
+    lambda: Vec<f64>,
+    previous_violation: f64,
+    outcome: StageOutcome,
+}
+
+impl Schedule {
+    /// The start of the schedule: `λ = 0` and `μ = μ₀` with constraints, no `λ` and `μ = 0`
+    /// without.
+    fn new(stage: &Stage<'_>, schedule: &AlSchedule) -> Self {
+        let (mu, lambda) = match stage.constraints {
+            Some(c) => (schedule.mu, vec![0.0; stage.flow.time_steps() * c.len()]),
+            None => (0.0, Vec::new()),
+        };
+        Self {
+            al_iteration: 0,
+            mu,
+            lambda,
+            previous_violation: f64::INFINITY,
+            outcome: StageOutcome {
+                momenta: Vec::new(),
+                evaluation: Evaluation::default(),
+                iterations: 0,
+                evaluations: 0,
+                al_iterations: 0,
+                mu,
+                lambda: Vec::new(),
+                stops: Vec::new(),
+                restarts: 0,
+                unsound: None,
+            },
+        }
+    }
+
+    /// The schedule of a paused stage, checked against the stage.
+    fn resumed(stage: &Stage<'_>, c: &StageCheckpoint, iterations: usize) -> Result<Self> {
+        let lambda_len = stage
+            .constraints
+            .map_or(0, |k| stage.flow.time_steps() * k.len());
+        if c.lambda.len() != lambda_len || c.al_iteration >= iterations {
+            return Err(Error::InvalidParameter(format!(
+                "the checkpoint does not fit the stage: AL iteration {} of {iterations}, {} \
+                 multipliers for {lambda_len}",
+                c.al_iteration,
+                c.lambda.len()
+            )));
+        }
+        Ok(Self {
+            al_iteration: c.al_iteration,
+            mu: c.mu,
+            lambda: c.lambda.clone(),
+            previous_violation: c.previous_violation,
+            outcome: c.done.clone(),
+        })
+    }
+
+    /// The checkpoint of the schedule paused in the minimisation `minimizer`.
+    fn paused(self, guard_start: Option<f64>, minimizer: MinimizerCheckpoint) -> StageCheckpoint {
+        StageCheckpoint {
+            al_iteration: self.al_iteration,
+            mu: self.mu,
+            lambda: self.lambda,
+            previous_violation: self.previous_violation,
+            guard_start,
+            done: self.outcome,
+            minimizer,
+        }
+    }
+}
+
+/// Runs a stage from `start`: one minimisation without constraints, the AL schedule with them.
+/// Every accepted iterate is checked ([`guard::check`] against the objective at the stage's
+/// start); after a minimisation that needed a restart, `μ` grows by `√mu_factor` only. A
+/// minimisation that ends unsound ends the stage ([`StageOutcome::unsound`]). `pause` is asked
+/// after every accepted iterate whether to stop there ([`StageRun::Paused`]); the stage resumed
+/// from that checkpoint ends with the very bits of a stage that never paused.
 pub fn run_stage(
     stage: &Stage<'_>,
     schedule: &AlSchedule,
     options: &LbfgsOptions,
-    start: Vec<f64>,
+    start: StageStart,
+    pause: &dyn Fn() -> bool,
     mut progress: impl FnMut(&Progress<'_>),
-) -> Result<StageOutcome> {
-    let stage_start = Cell::new(None);
+) -> Result<StageRun> {
+    let al_iterations = match stage.constraints {
+        Some(_) => {
+            schedule.check()?;
+            schedule.iterations
+        }
+        None => 1,
+    };
+    let (mut at, guard_start, mut minimizer_start) = match start {
+        StageStart::Momenta(momenta) => (
+            Schedule::new(stage, schedule),
+            None,
+            Start::Momenta(momenta),
+        ),
+        StageStart::Resume(c) => (
+            Schedule::resumed(stage, &c, al_iterations)?,
+            c.guard_start,
+            Start::Resume(Box::new(c.minimizer)),
+        ),
+    };
+    let stage_start = Cell::new(guard_start);
     let check = |e: &Evaluation| {
         let start = stage_start.get().unwrap_or(e.total);
         stage_start.set(Some(start));
         guard::check(stage.guard, e, start)
     };
-    let Some(constraints) = stage.constraints else {
-        let objective = Objective::new(
-            stage.flow,
-            stage.initial,
-            stage.attachment,
-            stage.data_weight,
-        );
-        let min = minimize(&objective, start, options, check, |r| {
-            progress(&Progress {
-                al_iteration: 0,
-                mu: 0.0,
-                report: r,
-            })
-        })?;
-        return Ok(StageOutcome {
-            unsound: unsound_stop(0, &min),
-            momenta: min.momenta,
-            evaluation: min.evaluation,
-            iterations: min.iterations,
-            evaluations: min.evaluations,
-            al_iterations: 1,
-            mu: 0.0,
-            lambda: Vec::new(),
-            restarts: min.restarts,
-            stops: vec![min.stop],
-        });
-    };
-    schedule.check()?;
-    let mut lambda = vec![0.0; stage.flow.time_steps() * constraints.len()];
-    let mut mu = schedule.mu;
-    let mut momenta = start;
-    let mut outcome = StageOutcome {
-        momenta: Vec::new(),
-        evaluation: Evaluation::default(),
-        iterations: 0,
-        evaluations: 0,
-        al_iterations: 0,
-        mu,
-        lambda: Vec::new(),
-        stops: Vec::new(),
-        restarts: 0,
-        unsound: None,
-    };
-    let mut previous_violation = f64::INFINITY;
-    for al_iteration in 0..schedule.iterations {
-        let objective = Objective::new(
-            stage.flow,
-            stage.initial,
-            stage.attachment,
-            stage.data_weight,
-        )
-        .with_penalty(Penalty {
-            constraints,
-            mu,
-            lambda: &lambda,
-        })?;
-        let min = minimize(&objective, momenta, options, check, |r| {
+    loop {
+        let (al_iteration, mu) = (at.al_iteration, at.mu);
+        let objective = objective_of(stage, mu, &at.lambda)?;
+        let report = |r: &IterationReport<'_>| {
             progress(&Progress {
                 al_iteration,
                 mu,
                 report: r,
             })
-        })?;
+        };
+        let min = match minimize(&objective, minimizer_start, options, check, pause, report)? {
+            Minimization::Done(min) => min,
+            Minimization::Paused(m) => {
+                return Ok(StageRun::Paused(Box::new(at.paused(stage_start.get(), *m))))
+            }
+        };
+        let outcome = &mut at.outcome;
         outcome.iterations += min.iterations;
         outcome.evaluations += min.evaluations;
         outcome.al_iterations += 1;
         outcome.restarts += min.restarts;
         outcome.evaluation = min.evaluation.clone();
         outcome.mu = mu;
-        outcome.lambda.clone_from(&lambda);
+        outcome.lambda.clone_from(&at.lambda);
         outcome.unsound = unsound_stop(al_iteration, &min);
         outcome.stops.push(min.stop);
-        momenta = min.momenta;
-        if outcome.unsound.is_some() {
-            break;
+        if outcome.unsound.is_some() || al_iteration + 1 == al_iterations {
+            at.outcome.momenta = min.momenta;
+            return Ok(StageRun::Done(Box::new(at.outcome)));
         }
-        let values = objective.constraint_values(&momenta)?;
-        lambda
+        let values = objective.constraint_values(&min.momenta)?;
+        at.lambda
             .iter_mut()
             .zip(&values)
             .for_each(|(lam, c)| *lam -= mu * c);
-        let violation = outcome.evaluation.max_abs_constraint;
+        let violation = at.outcome.evaluation.max_abs_constraint;
         let grow = match schedule.mu_update {
             MuUpdate::Always => true,
-            MuUpdate::IfNotHalved => violation > 0.5 * previous_violation,
+            MuUpdate::IfNotHalved => violation > 0.5 * at.previous_violation,
         };
-        previous_violation = violation;
+        at.previous_violation = violation;
         if grow {
             let factor = match min.restarts {
                 0 => schedule.mu_factor,
                 _ => schedule.mu_factor.sqrt(),
             };
-            mu = (mu * factor).min(schedule.mu_max);
+            at.mu = (mu * factor).min(schedule.mu_max);
         }
+        at.al_iteration += 1;
+        minimizer_start = Start::Momenta(min.momenta);
     }
-    outcome.momenta = momenta;
-    Ok(outcome)
+}
+
+/// The objective of `stage` with the penalty `(μ, λ)` when it has constraints.
+fn objective_of<'a>(stage: &Stage<'a>, mu: f64, lambda: &'a [f64]) -> Result<Objective<'a>> {
+    let objective = Objective::new(
+        stage.flow,
+        stage.initial,
+        stage.attachment,
+        stage.data_weight,
+    );
+    match stage.constraints {
+        Some(constraints) => objective.with_penalty(Penalty {
+            constraints,
+            mu,
+            lambda,
+        }),
+        None => Ok(objective),
+    }
 }
 
 /// The unsound stop of a minimisation of AL iteration `al_iteration`, if it ended so.

@@ -18,16 +18,17 @@
 use crate::fit::objective::Evaluation;
 use crate::model::{MedialTemplate, Model};
 use crate::Vec3;
+use serde::{Deserialize, Serialize};
 
 /// An objective above `DIVERGED · max(|E₀|, 1)`, `E₀` its value at the start of the stage,
 /// counts as diverged.
 pub const DIVERGED: f64 = 1e6;
 
 /// Why an iterate is not sound.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum Unsound {
     /// A figure that must be finite is not; names it.
-    NonFinite(&'static str),
+    NonFinite(String),
     /// The Dice estimate left `[0, 1]`.
     DiceOutOfRange(f64),
     /// The objective rose far above the stage's start.
@@ -184,13 +185,13 @@ pub fn check(guard: Option<&Guard>, e: &Evaluation, start: f64) -> Result<(), Un
         (e.max_abs_constraint, "max |C|"),
     ];
     if let Some((_, what)) = finite.iter().find(|(v, _)| !v.is_finite()) {
-        return Err(Unsound::NonFinite(what));
+        return Err(Unsound::NonFinite((*what).into()));
     }
     if e.final_positions
         .iter()
         .any(|p| !p.iter().all(|c| c.is_finite()))
     {
-        return Err(Unsound::NonFinite("a landmark position"));
+        return Err(Unsound::NonFinite("a landmark position".into()));
     }
     if let Some(d) = e.dice.filter(|d| !(0.0..=1.0).contains(d)) {
         return Err(Unsound::DiceOutOfRange(d));
@@ -268,7 +269,10 @@ mod tests {
         let q = vec![Vec3::zeros()];
         let mut e = evaluation(&q);
         e.penalty = f64::NAN;
-        assert_eq!(check(None, &e, 1.0), Err(Unsound::NonFinite("the penalty")));
+        assert_eq!(
+            check(None, &e, 1.0),
+            Err(Unsound::NonFinite("the penalty".into()))
+        );
         let mut e = evaluation(&q);
         e.dice = Some(5.8);
         assert_eq!(check(None, &e, 1.0), Err(Unsound::DiceOutOfRange(5.8)));
@@ -284,7 +288,7 @@ mod tests {
         e.dice = Some(0.5);
         assert_eq!(
             check(None, &e, 1.0),
-            Err(Unsound::NonFinite("a landmark position"))
+            Err(Unsound::NonFinite("a landmark position".into()))
         );
     }
 }

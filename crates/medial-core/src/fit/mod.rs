@@ -1,8 +1,9 @@
 //! Fitting: the objective of one stage and its exact gradient ([`objective`]), its minimisation
 //! with L-BFGS ([`optimize`]) with every iterate checked for soundness ([`guard`]), the
 //! augmented-Lagrangian schedule of a stage ([`augmented_lagrangian`]), and a whole fit of
-//! several stages in a row ([`stages`]); and the initial alignment, a similarity then an affine map
-//! ([`align`]).
+//! several stages in a row ([`stages`]), which can pause after any accepted iterate and resume
+//! from a serialisable [`Checkpoint`] to the same bits; and the initial alignment, a similarity
+//! then an affine map ([`align`]).
 
 pub mod align;
 pub mod augmented_lagrangian;
@@ -15,9 +16,10 @@ pub use align::{
     affine_between, align_affine, align_similarity, anisotropy, similarity_between, Alignment,
 };
 pub use augmented_lagrangian::{
-    run_stage, AlSchedule, MuUpdate, Progress, Stage, StageOutcome, UnsoundStop,
+    run_stage, AlSchedule, MuUpdate, Progress, Stage, StageCheckpoint, StageOutcome, StageRun,
+    StageStart, UnsoundStop,
 };
 pub use guard::{Guard, Unsound};
 pub use objective::{ConstraintSet, Evaluation, Objective, Penalty};
-pub use optimize::{minimize, LbfgsOptions, StopReason};
-pub use stages::{run_stages, FitEvent, PlannedStage};
+pub use optimize::{minimize, LbfgsOptions, Minimization, MinimizerCheckpoint, Start, StopReason};
+pub use stages::{run_stages, run_stages_resumable, Checkpoint, FitEvent, FitRun, PlannedStage};

@@ -6,6 +6,7 @@
 use crate::attachment::Attachment;
 use crate::flow::{Flow, Trajectory};
 use crate::{Error, Result, Vec3};
+use serde::{Deserialize, Serialize};
 
 /// A set of equality constraints `C(q) = 0` on the landmark configuration.
 pub trait ConstraintSet: Sync {
@@ -46,7 +47,7 @@ pub struct Penalty<'a> {
 }
 
 /// The figures of one evaluation. `kinetic` and `data` are unweighted.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Evaluation {
     /// `E_AL`.
     pub total: f64,

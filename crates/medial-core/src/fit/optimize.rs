@@ -14,6 +14,7 @@ use crate::{Error, Result};
 use argmin::core::{CostFunction, Gradient, IterState, Problem, Solver, State, TerminationStatus};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::LBFGS;
+use serde::{Deserialize, Serialize};
 use std::sync::Mutex;
 
 /// Options of [`minimize`].
@@ -41,7 +42,7 @@ impl Default for LbfgsOptions {
 }
 
 /// Why the minimisation stopped.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub enum StopReason {
     /// The relative gradient norm criterion holds.
     GradientTolerance,
@@ -54,6 +55,8 @@ pub enum StopReason {
     /// An iterate was unsound and no shorter step towards it was sound and lower (or the
     /// restarts ran out, or a restart made no progress). The minimum is the last sound iterate.
     Unsound(Unsound),
+    /// Paused at a checkpoint before a stopping rule held (in the figures of a paused fit).
+    Paused,
 }
 
 impl StopReason {
@@ -75,6 +78,7 @@ impl std::fmt::Display for StopReason {
             StopReason::MaxIterations => write!(f, "maximum number of iterations"),
             StopReason::LineSearch(why) => write!(f, "line search stopped: {why}"),
             StopReason::Unsound(why) => write!(f, "unsound iterate: {why}"),
+            StopReason::Paused => write!(f, "paused at a checkpoint"),
         }
     }
 }
@@ -114,6 +118,7 @@ pub struct Minimum {
 }
 
 /// The last accepted sound iterate of a minimisation.
+#[derive(Clone, Debug, Serialize, Deserialize)]
 struct Sound {
     momenta: Vec<f64>,
     evaluation: Evaluation,
@@ -121,82 +126,246 @@ struct Sound {
     iteration: usize,
 }
 
+/// Where a minimisation starts.
+pub enum Start {
+    /// From these momenta (iteration 0 is reported).
+    Momenta(Vec<f64>),
+    /// Where a paused minimisation stopped (nothing is reported again).
+    Resume(Box<MinimizerCheckpoint>),
+}
+
+/// How [`minimize`] ended.
+pub enum Minimization {
+    /// A stopping rule holds.
+    Done(Minimum),
+    /// `pause` asked for a stop after an accepted iterate: everything needed to go on.
+    Paused(Box<MinimizerCheckpoint>),
+}
+
+/// The L-BFGS solver as argmin holds it: its correction pairs and its line search.
+type Lbfgs = LBFGS<MoreThuenteLineSearch<Vec<f64>, Vec<f64>, f64>, Vec<f64>, Vec<f64>, f64>;
+
+/// argmin's state of an L-BFGS run (iterate, gradient, cost, counters).
+type LbfgsState = IterState<Vec<f64>, Vec<f64>, (), (), (), f64>;
+
+/// A run of L-BFGS with one memory, between two iterations.
+#[derive(Clone, Serialize, Deserialize)]
+struct Segment {
+    solver: Lbfgs,
+    state: LbfgsState,
+    /// `E` at the iterate before the last accepted one (the relative-decrease rule).
+    previous: f64,
+}
+
+/// A minimisation paused after an accepted iterate: the iterate with its evaluation and
+/// gradient (what the evaluation cache held), the counters, the restart bookkeeping and the
+/// L-BFGS memory, so that [`minimize`] from [`Start::Resume`] goes on to the same bits as a run
+/// that was never paused.
+#[derive(Clone, Serialize, Deserialize)]
+pub struct MinimizerCheckpoint {
+    sound: Sound,
+    /// `∇E` at the sound iterate.
+    gradient: Vec<f64>,
+    evaluations: usize,
+    /// `‖∇E(u₀)‖` of the minimisation (the relative gradient rule).
+    initial_gradient_norm: f64,
+    restarts: usize,
+    stalled: bool,
+    /// The iteration at which the current L-BFGS segment started.
+    segment_start: usize,
+    segment: Segment,
+}
+
+impl MinimizerCheckpoint {
+    /// The momenta of the last accepted iterate.
+    pub fn momenta(&self) -> &[f64] {
+        &self.sound.momenta
+    }
+
+    /// Its figures.
+    pub fn evaluation(&self) -> &Evaluation {
+        &self.sound.evaluation
+    }
+
+    /// Iterations accepted so far.
+    pub fn iterations(&self) -> usize {
+        self.sound.iteration
+    }
+
+    /// Value + gradient evaluations so far.
+    pub fn evaluations(&self) -> usize {
+        self.evaluations
+    }
+
+    /// Restarts so far.
+    pub fn restarts(&self) -> usize {
+        self.restarts
+    }
+}
+
+/// The state of a minimisation between segments of L-BFGS.
+struct Run {
+    sound: Sound,
+    initial_gradient_norm: f64,
+    restarts: usize,
+    stalled: bool,
+}
+
 /// Minimises `objective` from `start`, calling `report` after every accepted iterate (and once
-/// at the start, iteration 0). Every accepted iterate must pass `check`
+/// at a fresh start, iteration 0). Every accepted iterate must pass `check`
 /// ([`crate::fit::guard::check`]). One that does not is replaced by the first sound point
 /// `s + 2⁻ʲ (u − s)`, `j = 1 … 20`, below the last sound iterate `s`, and L-BFGS restarts there with fresh memory; so does a line search whose
 /// trial point cannot be evaluated, from the last sound iterate. The minimisation ends with
 /// [`StopReason::Unsound`] at the last sound iterate when no shorter step is sound, when two
 /// restarts in a row make no progress, or after [`MAX_RESTARTS`]. A start that cannot be
 /// evaluated is an error; an unsound start ends at once.
+///
+/// After every accepted iterate at which no stopping rule holds, `pause` is asked whether to
+/// stop there: if it says so, the minimisation returns [`Minimization::Paused`], and
+/// [`Start::Resume`] with it continues to the very bits of a run that never paused.
 pub fn minimize(
     objective: &Objective<'_>,
-    start: Vec<f64>,
+    start: Start,
     options: &LbfgsOptions,
     check: impl Fn(&Evaluation) -> Result<(), Unsound>,
+    pause: &dyn Fn() -> bool,
     mut report: impl FnMut(&IterationReport<'_>),
-) -> Result<Minimum> {
-    if start.len() != objective.dimension() {
-        return Err(Error::ShapeMismatch {
-            what: "initial momenta".into(),
-            expected: objective.dimension(),
-            found: start.len(),
-        });
-    }
+) -> Result<Minimization> {
     let cached = Cached::new(objective);
-    cached.ensure(&start)?;
-    let (evaluation, grad0) = cached.current();
-    let mut sound = Sound {
-        momenta: start,
-        evaluation,
-        gradient_norm: grad0,
-        iteration: 0,
+    let (mut run, mut segment, mut segment_start) = match start {
+        Start::Momenta(momenta) => match fresh(&cached, momenta, &check, &mut report)? {
+            Ok(run) => (run, None, 0),
+            Err(unsound_start) => return Ok(Minimization::Done(unsound_start)),
+        },
+        Start::Resume(checkpoint) => {
+            let c = *checkpoint;
+            check_length(objective, &c.sound.momenta)?;
+            cached.restore(&c.sound, c.gradient, c.evaluations);
+            let run = Run {
+                sound: c.sound,
+                initial_gradient_norm: c.initial_gradient_norm,
+                restarts: c.restarts,
+                stalled: c.stalled,
+            };
+            (run, Some(c.segment), c.segment_start)
+        }
     };
-    let (mut restarts, mut stalled) = (0, false);
-    let stop = match check(&sound.evaluation) {
-        Err(cause) => StopReason::Unsound(cause),
-        Ok(()) => {
-            report(&IterationReport {
-                iteration: 0,
-                evaluations: cached.count(),
-                evaluation: &sound.evaluation,
-                gradient_norm: grad0,
-                momenta: &sound.momenta,
-            });
-            loop {
-                let before = sound.iteration;
-                match lbfgs(&cached, &mut sound, options, grad0, &check, &mut report)? {
-                    Segment::Restart(cause) => {
-                        let stuck = sound.iteration == before && stalled;
-                        if stuck || restarts == MAX_RESTARTS {
-                            break StopReason::Unsound(cause);
-                        }
-                        stalled = sound.iteration == before;
-                        restarts += 1;
-                    }
-                    Segment::Stop(stop) => break stop,
+    let stop = loop {
+        let resumed = segment.take();
+        if resumed.is_none() {
+            segment_start = run.sound.iteration;
+        }
+        let grad0 = run.initial_gradient_norm;
+        let end = lbfgs(
+            &cached,
+            &mut run.sound,
+            options,
+            grad0,
+            resumed,
+            &check,
+            pause,
+            &mut report,
+        )?;
+        match end {
+            SegmentEnd::Restart(cause) => {
+                let progressed = run.sound.iteration != segment_start;
+                if (!progressed && run.stalled) || run.restarts == MAX_RESTARTS {
+                    break StopReason::Unsound(cause);
                 }
+                run.stalled = !progressed;
+                run.restarts += 1;
+            }
+            SegmentEnd::Stop(stop) => break stop,
+            SegmentEnd::Paused(segment) => {
+                let (gradient, evaluations) = cached.gradient_and_count();
+                return Ok(Minimization::Paused(Box::new(MinimizerCheckpoint {
+                    gradient,
+                    evaluations,
+                    initial_gradient_norm: run.initial_gradient_norm,
+                    restarts: run.restarts,
+                    stalled: run.stalled,
+                    segment_start,
+                    segment: *segment,
+                    sound: run.sound,
+                })));
             }
         }
     };
-    Ok(Minimum {
-        momenta: sound.momenta,
-        evaluation: sound.evaluation,
-        gradient_norm: sound.gradient_norm,
-        iterations: sound.iteration,
+    Ok(Minimization::Done(Minimum {
+        momenta: run.sound.momenta,
+        evaluation: run.sound.evaluation,
+        gradient_norm: run.sound.gradient_norm,
+        iterations: run.sound.iteration,
         evaluations: cached.count(),
-        restarts,
+        restarts: run.restarts,
         stop,
-    })
+    }))
+}
+
+/// `u` has the length of the objective's momenta.
+fn check_length(objective: &Objective<'_>, u: &[f64]) -> Result<()> {
+    if u.len() == objective.dimension() {
+        Ok(())
+    } else {
+        Err(Error::ShapeMismatch {
+            what: "initial momenta".into(),
+            expected: objective.dimension(),
+            found: u.len(),
+        })
+    }
+}
+
+/// Evaluates and checks the start `momenta` and reports it as iteration 0; an unsound start is
+/// `Err`: the minimisation ended there.
+fn fresh(
+    cached: &Cached<'_, '_>,
+    momenta: Vec<f64>,
+    check: &impl Fn(&Evaluation) -> Result<(), Unsound>,
+    report: &mut impl FnMut(&IterationReport<'_>),
+) -> Result<std::result::Result<Run, Minimum>> {
+    check_length(cached.objective, &momenta)?;
+    cached.ensure(&momenta)?;
+    let (evaluation, grad0) = cached.current();
+    if let Err(cause) = check(&evaluation) {
+        return Ok(Err(Minimum {
+            momenta,
+            evaluation,
+            gradient_norm: grad0,
+            iterations: 0,
+            evaluations: cached.count(),
+            restarts: 0,
+            stop: StopReason::Unsound(cause),
+        }));
+    }
+    report(&IterationReport {
+        iteration: 0,
+        evaluations: cached.count(),
+        evaluation: &evaluation,
+        gradient_norm: grad0,
+        momenta: &momenta,
+    });
+    Ok(Ok(Run {
+        sound: Sound {
+            momenta,
+            evaluation,
+            gradient_norm: grad0,
+            iteration: 0,
+        },
+        initial_gradient_norm: grad0,
+        restarts: 0,
+        stalled: false,
+    }))
 }
 
 /// How a run of L-BFGS with one memory ended.
-enum Segment {
+enum SegmentEnd {
     /// A stopping rule holds.
     Stop(StopReason),
     /// An iterate was unsound: after a shorter step towards it (when one was sound and lower),
     /// L-BFGS starts again with fresh memory from `sound`.
     Restart(Unsound),
+    /// `pause` asked for a stop after an accepted iterate.
+    Paused(Box<Segment>),
 }
 
 /// Most restarts of L-BFGS in one minimisation; past them an unsound iterate ends it.
@@ -205,48 +374,50 @@ pub const MAX_RESTARTS: usize = 100;
 /// Halvings of the step towards an unsound iterate tried before giving up on it.
 const BACKOFF_HALVINGS: usize = 20;
 
-/// L-BFGS from the sound iterate `sound`, with fresh memory, until a stopping rule holds or an
-/// iterate is unsound; `sound` follows every accepted sound iterate. An unsound iterate `u` is
+/// L-BFGS from the sound iterate `sound`, with fresh memory (or from the paused `resumed`
+/// segment), until a stopping rule holds, an iterate is unsound or `pause` asks for a stop;
+/// `sound` follows every accepted sound iterate. An unsound iterate `u` is
 /// replaced, when possible, by the first sound point `s + 2⁻ʲ (u − s)`, `j = 1 …`
 /// [`BACKOFF_HALVINGS`], below the last sound iterate `s` (accepted and reported as the next
 /// iterate) before L-BFGS restarts.
+#[allow(clippy::too_many_arguments)]
 fn lbfgs(
     cached: &Cached<'_, '_>,
     sound: &mut Sound,
     options: &LbfgsOptions,
     grad0: f64,
+    resumed: Option<Segment>,
     check: &impl Fn(&Evaluation) -> Result<(), Unsound>,
+    pause: &dyn Fn() -> bool,
     report: &mut impl FnMut(&IterationReport<'_>),
-) -> Result<Segment> {
+) -> Result<SegmentEnd> {
     if grad0 == 0.0 {
-        return Ok(Segment::Stop(StopReason::GradientTolerance));
+        return Ok(SegmentEnd::Stop(StopReason::GradientTolerance));
     }
     let unsound_trial = |e: argmin::core::Error| {
-        Segment::Restart(Unsound::Evaluation(cached.error_or(e).to_string()))
+        SegmentEnd::Restart(Unsound::Evaluation(cached.error_or(e).to_string()))
     };
     let mut problem = Problem::new(cached);
-    let mut solver = LBFGS::new(MoreThuenteLineSearch::new(), options.memory.max(1))
-        .with_tolerance_grad(0.0)
-        .and_then(|s| s.with_tolerance_cost(0.0))
-        .map_err(|e| Error::Optimisation(e.to_string()))?;
-    let state = IterState::new()
-        .param(sound.momenta.clone())
-        .max_iters((options.max_iterations - sound.iteration) as u64);
-    let mut state = match solver.init(&mut problem, state) {
-        Ok((state, _)) => state,
-        Err(e) => return Ok(unsound_trial(e)),
+    let Segment {
+        mut solver,
+        mut state,
+        mut previous,
+    } = match resumed {
+        Some(segment) => segment,
+        None => match start_segment(&mut problem, sound, options)? {
+            Ok(segment) => segment,
+            Err(e) => return Ok(unsound_trial(e)),
+        },
     };
-    state.update();
-    let mut previous = sound.evaluation.total;
     loop {
         if sound.iteration >= options.max_iterations {
-            return Ok(Segment::Stop(StopReason::MaxIterations));
+            return Ok(SegmentEnd::Stop(StopReason::MaxIterations));
         }
         if let TerminationStatus::Terminated(reason) =
             Solver::<&Cached, _>::terminate_internal(&mut solver, &state)
         {
             if !matches!(reason, argmin::core::TerminationReason::MaxItersReached) {
-                return Ok(Segment::Stop(StopReason::LineSearch(reason.to_string())));
+                return Ok(SegmentEnd::Stop(StopReason::LineSearch(reason.to_string())));
             }
         }
         state = match solver.next_iter(&mut problem, state) {
@@ -255,7 +426,7 @@ fn lbfgs(
         };
         state.update();
         if let TerminationStatus::Terminated(reason) = state.get_termination_status() {
-            return Ok(Segment::Stop(StopReason::LineSearch(reason.to_string())));
+            return Ok(SegmentEnd::Stop(StopReason::LineSearch(reason.to_string())));
         }
         state.increment_iter();
         let param = state
@@ -267,22 +438,53 @@ fn lbfgs(
             .and_then(|()| check(&cached.current().0));
         if let Err(cause) = verdict {
             if back_off(cached, sound, param, check, report) {
-                return Ok(Segment::Restart(cause));
+                return Ok(SegmentEnd::Restart(cause));
             }
-            return Ok(Segment::Stop(StopReason::Unsound(cause)));
+            return Ok(SegmentEnd::Stop(StopReason::Unsound(cause)));
         }
         let (evaluation, gradient_norm) = cached.current();
         accept(cached, sound, param, evaluation, gradient_norm, report);
         if gradient_norm <= options.gradient_tolerance * grad0 {
-            return Ok(Segment::Stop(StopReason::GradientTolerance));
+            return Ok(SegmentEnd::Stop(StopReason::GradientTolerance));
         }
         let total = sound.evaluation.total;
         let scale = total.abs().max(previous.abs());
         if previous - total <= options.relative_decrease * scale {
-            return Ok(Segment::Stop(StopReason::RelativeDecrease));
+            return Ok(SegmentEnd::Stop(StopReason::RelativeDecrease));
         }
         previous = total;
+        if pause() {
+            return Ok(SegmentEnd::Paused(Box::new(Segment {
+                solver,
+                state,
+                previous,
+            })));
+        }
     }
+}
+
+/// A fresh L-BFGS solver and state at the sound iterate (`Err` from argmin when the start
+/// cannot be evaluated).
+fn start_segment(
+    problem: &mut Problem<&Cached<'_, '_>>,
+    sound: &Sound,
+    options: &LbfgsOptions,
+) -> Result<std::result::Result<Segment, argmin::core::Error>> {
+    let mut solver = LBFGS::new(MoreThuenteLineSearch::new(), options.memory.max(1))
+        .with_tolerance_grad(0.0)
+        .and_then(|s| s.with_tolerance_cost(0.0))
+        .map_err(|e| Error::Optimisation(e.to_string()))?;
+    let state = IterState::new()
+        .param(sound.momenta.clone())
+        .max_iters((options.max_iterations - sound.iteration) as u64);
+    Ok(solver.init(problem, state).map(|(mut state, _)| {
+        state.update();
+        Segment {
+            solver,
+            state,
+            previous: sound.evaluation.total,
+        }
+    }))
 }
 
 /// Makes `u` the sound iterate and reports it.
@@ -382,6 +584,7 @@ impl<'o, 'a> Cached<'o, 'a> {
                 last.evaluation = evaluation;
                 last.gradient = gradient;
                 last.count += 1;
+                last.failure = None;
                 Ok(())
             }
             Err(e) => {
@@ -389,6 +592,16 @@ impl<'o, 'a> Cached<'o, 'a> {
                 Err(e)
             }
         }
+    }
+
+    /// Remembers `sound` with its gradient after `count` evaluations, as the cache held them
+    /// when a minimisation paused there.
+    fn restore(&self, sound: &Sound, gradient: Vec<f64>, count: usize) {
+        let mut last = self.lock();
+        last.momenta.clone_from(&sound.momenta);
+        last.evaluation = sound.evaluation.clone();
+        last.gradient = gradient;
+        last.count = count;
     }
 
     fn current(&self) -> (Evaluation, f64) {
@@ -401,6 +614,12 @@ impl<'o, 'a> Cached<'o, 'a> {
 
     fn count(&self) -> usize {
         self.lock().count
+    }
+
+    /// The remembered gradient and the number of evaluations.
+    fn gradient_and_count(&self) -> (Vec<f64>, usize) {
+        let last = self.lock();
+        (last.gradient.clone(), last.count)
     }
 
     /// The engine's own error if an evaluation failed, else argmin's.

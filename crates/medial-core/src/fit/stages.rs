@@ -2,9 +2,12 @@
 //! one before ended (the paper's SSD initialisation towards an affine map, then Dice stages with
 //! μ rising). All stages share one flow, so that their momenta are of one size.
 
-use crate::fit::augmented_lagrangian::{run_stage, AlSchedule, Progress, Stage, StageOutcome};
+use crate::fit::augmented_lagrangian::{
+    run_stage, AlSchedule, Progress, Stage, StageCheckpoint, StageOutcome, StageRun, StageStart,
+};
 use crate::fit::optimize::LbfgsOptions;
 use crate::{Error, Result};
+use serde::{Deserialize, Serialize};
 
 /// A stage with its schedule: what [`run_stage`] needs besides the starting momenta.
 #[derive(Clone, Copy)]
@@ -36,14 +39,89 @@ pub enum FitEvent<'e> {
     },
 }
 
+/// A fit paused after an accepted L-BFGS iterate: the outcomes of the stages before, and the
+/// stage in progress ([`StageCheckpoint`]). Serialisable (serde) in full, every number as it
+/// is: written in a format that keeps every `f64` bit (±∞ included), [`run_stages_resumable`]
+/// from it ends with the very bits of a fit that never paused.
+#[derive(Clone, Serialize, Deserialize)]
+pub struct Checkpoint {
+    completed: Vec<StageOutcome>,
+    current: StageCheckpoint,
+}
+
+impl Checkpoint {
+    /// Index of the stage in progress.
+    pub fn stage(&self) -> usize {
+        self.completed.len()
+    }
+
+    /// AL iteration in progress of that stage (0-based).
+    pub fn al_iteration(&self) -> usize {
+        self.current.al_iteration()
+    }
+
+    /// Accepted iterations of the minimisation in progress.
+    pub fn iteration(&self) -> usize {
+        self.current.iteration()
+    }
+
+    /// The outcome of every stage so far: those that ended, then the one in progress as it
+    /// stands ([`StageCheckpoint::partial`]); the last holds the fit's momenta so far.
+    pub fn outcomes(&self) -> Vec<StageOutcome> {
+        let mut outcomes = self.completed.clone();
+        outcomes.push(self.current.partial());
+        outcomes
+    }
+}
+
+impl std::fmt::Debug for Checkpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Checkpoint")
+            .field("stage", &self.stage())
+            .field("al_iteration", &self.al_iteration())
+            .field("iteration", &self.iteration())
+            .finish_non_exhaustive()
+    }
+}
+
+/// How [`run_stages_resumable`] ended.
+pub enum FitRun {
+    /// Every stage ran (or one ended unsound): the outcome of each stage run.
+    Complete(Vec<StageOutcome>),
+    /// `pause` asked for a stop: the checkpoint to resume from.
+    Paused(Box<Checkpoint>),
+}
+
 /// Runs `stages` in order, the first from zero momenta, each later one from the momenta of the
 /// one before; returns the outcome of every stage run (the last one holds the fit's momenta).
 /// A stage that ends unsound ([`StageOutcome::unsound`]) is the last one run. `report` sees
 /// every L-BFGS iteration and the end of every stage.
 pub fn run_stages(
     stages: &[PlannedStage<'_>],
-    mut report: impl FnMut(FitEvent<'_>),
+    report: impl FnMut(FitEvent<'_>),
 ) -> Result<Vec<StageOutcome>> {
+    match run_stages_resumable(stages, None, &|| false, report)? {
+        FitRun::Complete(outcomes) => Ok(outcomes),
+        FitRun::Paused(_) => Err(Error::Optimisation(
+            "a fit that is never asked to pause paused".into(),
+        )),
+    }
+}
+
+/// [`run_stages`] that can pause and resume: from the start (`from = None`) or from a
+/// checkpoint of the same plan. After every accepted L-BFGS iterate at which no stopping rule
+/// holds, `pause` is asked whether to stop there; if so, the fit returns [`FitRun::Paused`].
+/// Resumed from that checkpoint, it reports the iterations and stage ends that follow (none
+/// twice) and ends with the very bits, figures and counts of a fit that never paused.
+///
+/// Errors: those of [`run_stage`]; [`Error::InvalidParameter`] or [`Error::ShapeMismatch`]
+/// for a checkpoint that does not fit `stages`.
+pub fn run_stages_resumable(
+    stages: &[PlannedStage<'_>],
+    from: Option<Checkpoint>,
+    pause: &dyn Fn() -> bool,
+    mut report: impl FnMut(FitEvent<'_>),
+) -> Result<FitRun> {
     let Some(first) = stages.first() else {
         return Err(Error::InvalidParameter(
             "a fit needs at least one stage".into(),
@@ -57,14 +135,23 @@ pub fn run_stages(
             found: other.stage.flow.momenta_len(),
         });
     }
-    let mut momenta = vec![0.0; len];
-    let mut outcomes = Vec::with_capacity(stages.len());
-    for (index, planned) in stages.iter().enumerate() {
-        let outcome = run_stage(
+    let (mut outcomes, mut start) = match from {
+        None => (
+            Vec::with_capacity(stages.len()),
+            StageStart::Momenta(vec![0.0; len]),
+        ),
+        Some(c) => {
+            check_fits(&c, stages.len(), len)?;
+            (c.completed, StageStart::Resume(Box::new(c.current)))
+        }
+    };
+    for (index, planned) in stages.iter().enumerate().skip(outcomes.len()) {
+        let run = run_stage(
             &planned.stage,
             &planned.schedule,
             &planned.lbfgs,
-            momenta,
+            start,
+            pause,
             |progress| {
                 report(FitEvent::Iteration {
                     stage: index,
@@ -72,16 +159,275 @@ pub fn run_stages(
                 })
             },
         )?;
+        let outcome = match run {
+            StageRun::Done(outcome) => *outcome,
+            StageRun::Paused(current) => {
+                return Ok(FitRun::Paused(Box::new(Checkpoint {
+                    completed: outcomes,
+                    current: *current,
+                })))
+            }
+        };
         report(FitEvent::StageEnd {
             stage: index,
             outcome: &outcome,
         });
-        momenta = outcome.momenta.clone();
+        start = StageStart::Momenta(outcome.momenta.clone());
         let unsound = outcome.unsound.is_some();
         outcomes.push(outcome);
         if unsound {
             break;
         }
     }
-    Ok(outcomes)
+    Ok(FitRun::Complete(outcomes))
+}
+
+/// A checkpoint of a plan of `stages` stages whose momenta have `len` numbers.
+fn check_fits(c: &Checkpoint, stages: usize, len: usize) -> Result<()> {
+    if c.stage() >= stages {
+        return Err(Error::InvalidParameter(format!(
+            "the checkpoint is in stage {} of a fit of {stages} stages",
+            c.stage() + 1
+        )));
+    }
+    if c.current.momenta().len() != len {
+        return Err(Error::ShapeMismatch {
+            what: "momenta of the checkpoint".into(),
+            expected: len,
+            found: c.current.momenta().len(),
+        });
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::attachment::ssd::Ssd;
+    use crate::fit::guard::Guard;
+    use crate::fit::{ConstraintSet, StopReason};
+    use crate::flow::{Flow, FlowParams};
+    use crate::model::MedialConstraints;
+    use crate::testing::meshes::bipyramid;
+    use crate::Vec3;
+    use std::cell::Cell;
+
+    /// What a report says about an iteration, bit for bit.
+    type Row = (usize, usize, usize, usize, u64, u64);
+
+    /// Two stages on the hexagonal bipyramid: SSD without constraints towards its boundary
+    /// rotated, stretched and shifted, then constrained SSD over three AL iterations.
+    struct Case {
+        flow: Flow,
+        initial: Vec<Vec3>,
+        ssd: Ssd,
+        constraints: MedialConstraints,
+        guard: Guard,
+    }
+
+    impl Case {
+        fn new() -> Self {
+            let t = bipyramid(0.4);
+            let r = nalgebra::Rotation3::from_euler_angles(0.2, -0.1, 0.3);
+            let targets = t
+                .boundary_points()
+                .iter()
+                .map(|p| r * p * 1.1 + Vec3::new(0.1, 0.0, -0.05));
+            let params = FlowParams {
+                sigma: 0.8,
+                time_steps: 4,
+                kinetic_weight: 0.01,
+            };
+            Self {
+                flow: Flow::new(params, t.landmark_count()).unwrap(),
+                initial: t.landmarks().to_vec(),
+                ssd: Ssd::new(targets.collect()).unwrap(),
+                constraints: MedialConstraints::new(&t),
+                guard: Guard::of_template(&t),
+            }
+        }
+
+        fn plan(&self) -> Vec<PlannedStage<'_>> {
+            let constrained: &dyn ConstraintSet = &self.constraints;
+            let stage = |constraints| Stage {
+                flow: &self.flow,
+                initial: &self.initial,
+                attachment: &self.ssd,
+                data_weight: 1.0,
+                constraints,
+                guard: Some(&self.guard),
+            };
+            let lbfgs = LbfgsOptions {
+                max_iterations: 12,
+                memory: 4,
+                ..LbfgsOptions::default()
+            };
+            vec![
+                PlannedStage {
+                    stage: stage(None),
+                    schedule: AlSchedule::default(),
+                    lbfgs,
+                },
+                PlannedStage {
+                    stage: stage(Some(constrained)),
+                    schedule: AlSchedule {
+                        mu: 1.0,
+                        mu_factor: 10.0,
+                        iterations: 3,
+                        ..AlSchedule::default()
+                    },
+                    lbfgs,
+                },
+            ]
+        }
+    }
+
+    /// Runs the plan from `from`, pausing when `pause(rows so far)` says so; appends a row per
+    /// reported iteration.
+    fn run(
+        plan: &[PlannedStage<'_>],
+        from: Option<Checkpoint>,
+        pause: impl Fn(usize) -> bool,
+        rows: &mut Vec<Row>,
+    ) -> FitRun {
+        let count = Cell::new(rows.len());
+        let paused = || pause(count.get());
+        let result = run_stages_resumable(plan, from, &paused, |event| {
+            if let FitEvent::Iteration { stage, progress } = event {
+                let r = progress.report;
+                rows.push((
+                    stage,
+                    progress.al_iteration,
+                    r.iteration,
+                    r.evaluations,
+                    progress.mu.to_bits(),
+                    r.evaluation.total.to_bits(),
+                ));
+                count.set(count.get() + 1);
+            }
+        });
+        result.unwrap()
+    }
+
+    /// Through postcard and back, as the command line stores it; the bytes survive a second
+    /// round trip unchanged (every number kept, ±∞ included).
+    fn round_trip(c: &Checkpoint) -> Checkpoint {
+        let bytes = postcard::to_stdvec(c).unwrap();
+        let back: Checkpoint = postcard::from_bytes(&bytes).unwrap();
+        assert_eq!(postcard::to_stdvec(&back).unwrap(), bytes);
+        back
+    }
+
+    /// Everything of each outcome, every number to the bit.
+    fn bits(outcomes: &[StageOutcome]) -> Vec<String> {
+        let to_bits = |x: &[f64]| x.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        outcomes
+            .iter()
+            .map(|o| {
+                format!(
+                    "{:?} {:?} {} {} {:?} {:?}",
+                    to_bits(&o.momenta),
+                    to_bits(&o.lambda),
+                    o.iterations,
+                    o.evaluations,
+                    o.stops,
+                    o.evaluation
+                )
+            })
+            .collect()
+    }
+
+    fn complete(run: FitRun) -> Vec<StageOutcome> {
+        match run {
+            FitRun::Complete(outcomes) => outcomes,
+            FitRun::Paused(c) => panic!("paused at {c:?}"),
+        }
+    }
+
+    #[test]
+    fn a_fit_paused_anywhere_and_resumed_ends_with_the_same_bits() {
+        let case = Case::new();
+        let plan = case.plan();
+        let mut baseline_rows = Vec::new();
+        let baseline = complete(run(&plan, None, |_| false, &mut baseline_rows));
+        assert_eq!(baseline.len(), 2);
+        assert_eq!(baseline[1].al_iterations, 3);
+        let first_of = |stage: usize, al: usize| {
+            baseline_rows
+                .iter()
+                .position(|r| r.0 == stage && r.1 == al)
+                .unwrap()
+        };
+        // Early in the first stage, the second AL iteration of the second stage, and late in it.
+        for at in [2, first_of(1, 1) + 3, baseline_rows.len() - 3] {
+            let mut rows = Vec::new();
+            let FitRun::Paused(checkpoint) = run(&plan, None, |n| n >= at, &mut rows) else {
+                panic!("no pause at row {at}");
+            };
+            assert_eq!(rows.len(), at, "paused right after the asked row");
+            let partial = checkpoint.outcomes();
+            assert_eq!(
+                partial.last().unwrap().stops.last(),
+                Some(&StopReason::Paused)
+            );
+            let resumed = complete(run(
+                &plan,
+                Some(round_trip(&checkpoint)),
+                |_| false,
+                &mut rows,
+            ));
+            assert_eq!(rows, baseline_rows, "paused at row {at}");
+            assert_eq!(bits(&resumed), bits(&baseline), "paused at row {at}");
+        }
+    }
+
+    #[test]
+    fn a_fit_paused_after_every_iterate_ends_with_the_same_bits() {
+        let case = Case::new();
+        let plan = case.plan();
+        let mut baseline_rows = Vec::new();
+        let baseline = complete(run(&plan, None, |_| false, &mut baseline_rows));
+        let (mut rows, mut from, mut pauses) = (Vec::new(), None, 0);
+        let outcomes = loop {
+            match run(&plan, from.take(), |_| true, &mut rows) {
+                FitRun::Complete(outcomes) => break outcomes,
+                FitRun::Paused(c) => {
+                    pauses += 1;
+                    from = Some(round_trip(&c));
+                }
+            }
+        };
+        assert!(pauses > 10, "{pauses} pauses");
+        assert_eq!(rows, baseline_rows);
+        assert_eq!(bits(&outcomes), bits(&baseline));
+    }
+
+    #[test]
+    fn a_checkpoint_of_another_plan_is_refused() {
+        let case = Case::new();
+        let plan = case.plan();
+        let mut rows = Vec::new();
+        let at = 30;
+        let FitRun::Paused(checkpoint) = run(&plan, None, |n| n >= at, &mut rows) else {
+            panic!("no pause");
+        };
+        assert_eq!(checkpoint.stage(), 1, "row {at} is in the second stage");
+        let one_stage = &plan[..1];
+        let result = run_stages_resumable(one_stage, Some(*checkpoint.clone()), &|| false, |_| {});
+        assert!(matches!(result, Err(Error::InvalidParameter(_))));
+        // The same plan with a longer flow: the momenta do not fit.
+        let other = Flow::new(
+            FlowParams {
+                sigma: 0.8,
+                time_steps: 5,
+                kinetic_weight: 0.01,
+            },
+            case.initial.len(),
+        )
+        .unwrap();
+        let mut longer = plan.clone();
+        longer.iter_mut().for_each(|p| p.stage.flow = &other);
+        let result = run_stages_resumable(&longer, Some(*checkpoint), &|| false, |_| {});
+        assert!(matches!(result, Err(Error::ShapeMismatch { .. })));
+    }
 }
