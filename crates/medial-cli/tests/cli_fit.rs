@@ -120,7 +120,9 @@ fn check_time_points(out: &Path, summary: &Value) {
     assert_eq!(
         lines.next().unwrap(),
         "time_point,t,max_spoke_normal_deg,mean_spoke_normal_deg,max_spoke_mismatch_pct,\
-         max_abs_constraint_mm2,min_thickness_mm,max_thickness_mm"
+         max_abs_constraint_mm2,min_thickness_mm,max_thickness_mm,\
+         ball_residual_sheet_mean_pct,ball_residual_sheet_max_pct,balls_poking_out_sheet,\
+         ball_residual_edge_mean_pct,ball_residual_edge_max_pct,balls_poking_out_edge"
     );
     let rows: Vec<Vec<f64>> = lines
         .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
@@ -128,6 +130,8 @@ fn check_time_points(out: &Path, summary: &Value) {
     assert_eq!(rows.len(), 11);
     assert!((rows[0][2] - 0.070140).abs() < 1e-5, "{:?}", rows[0]);
     assert!((rows[0][4] - 0.066982).abs() < 1e-5, "{:?}", rows[0]);
+    // The template's inscribed-ball residual of its sheet atoms (README, Medial fidelity).
+    assert!((rows[0][8] - 1.308).abs() < 1e-3, "{:?}", rows[0]);
     let last = &summary["final"];
     assert_eq!(rows[10][1], 1.0);
     assert!((rows[10][2] - f(&last["max_spoke_normal_deg"])).abs() < 1e-12);
@@ -137,6 +141,11 @@ fn check_time_points(out: &Path, summary: &Value) {
     assert_eq!(f(&over["max_spoke_normal_deg"]), worst(2));
     assert_eq!(f(&over["max_spoke_mismatch_pct"]), worst(4));
     assert_eq!(f(&over["max_abs_constraint_mm2"]), worst(5));
+    let sheet_mean = f(&over["ball_fidelity"]["sheet"]["mean_residual_pct"]);
+    assert!(
+        (sheet_mean - worst(8)).abs() <= 1e-12 * sheet_mean,
+        "{sheet_mean}"
+    );
 }
 
 #[test]

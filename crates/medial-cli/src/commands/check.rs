@@ -114,10 +114,13 @@ fn worst<'a>(points: impl Iterator<Item = &'a TimePointFigures>) -> BallFigures 
         .expect("at least one configuration")
 }
 
+/// Landmarks (boundary points, then medial points) at a numbered time point.
+type Configuration = (usize, Vec<Vec3>);
+
 /// The structure of a fit folder (its fitted_template.vtk) and its landmarks at every time
 /// point written under flow/ (boundary points, then medial points), in time order; the fitted
 /// template alone if flow/ holds none.
-fn fit_folder(dir: &Path) -> Result<(MedialTemplate, Vec<(usize, Vec<Vec3>)>), CliError> {
+fn fit_folder(dir: &Path) -> Result<(MedialTemplate, Vec<Configuration>), CliError> {
     let template = medial_io::cmrep::read_template(&dir.join("fitted_template.vtk"))?;
     let flow = dir.join("flow");
     let mut configurations = Vec::new();
