@@ -96,13 +96,41 @@ pub struct Alignment {
     pub voxel_dice: f64,
 }
 
-/// The similarity that best carries the closed template boundary `boundary` onto the
-/// foreground of the binary `mask` (see the module doc).
-pub fn align_similarity(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> {
+/// The moments of `mask`'s foreground and of `boundary`'s interior (rasterized at the image's
+/// smallest voxel size), and the voxel Dice of `boundary` against `mask`.
+fn moments_and_dice(boundary: &TriMesh, mask: &Volume) -> Result<(Moments, Moments, f64)> {
     let image = Moments::of(mask)?;
     let spacing = mask.spacing().min();
     let (dims, grid) = grid_around(boundary, spacing, 2.0 * spacing)?;
     let template = Moments::of(&rasterize(boundary, dims, grid)?)?;
+    Ok((image, template, voxel_dice(boundary, mask)?))
+}
+
+/// The map `p ↦ linear · p + t` that carries the template centroid onto the image centroid,
+/// with the voxel Dice of `boundary` moved by it against `mask`.
+fn candidate(
+    boundary: &TriMesh,
+    mask: &Volume,
+    linear: Matrix3<f64>,
+    image: &Moments,
+    template: &Moments,
+) -> Result<(Matrix4<f64>, f64)> {
+    let mut matrix = linear.to_homogeneous();
+    let shift = image.centroid - linear * template.centroid;
+    matrix.fixed_view_mut::<3, 1>(0, 3).copy_from(&shift);
+    let moved: Vec<Vec3> = boundary
+        .points()
+        .iter()
+        .map(|p| linear * p + shift)
+        .collect();
+    let dice = voxel_dice(&TriMesh::new(moved, boundary.triangles().to_vec())?, mask)?;
+    Ok((matrix, dice))
+}
+
+/// The similarity that best carries the closed template boundary `boundary` onto the
+/// foreground of the binary `mask` (see the module doc).
+pub fn align_similarity(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> {
+    let (image, template, voxel_dice_before) = moments_and_dice(boundary, mask)?;
     let scale = (image.volume / template.volume).cbrt();
     let (e_img, e_tmpl) = (image.frame(), template.frame());
     let signs = [
@@ -116,20 +144,10 @@ pub fn align_similarity(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> 
             .iter()
             .map(|d| e_img * Matrix3::from_diagonal(&Vec3::from(*d)) * e_tmpl.transpose()),
     );
-    let voxel_dice_before = voxel_dice(boundary, mask)?;
     // No move at all is a candidate too: moments can mislead on a thin or partial shape.
     let mut best = (Matrix4::identity(), voxel_dice_before);
     for r in rotations {
-        let linear = r * scale;
-        let mut matrix = linear.to_homogeneous();
-        let shift = image.centroid - linear * template.centroid;
-        matrix.fixed_view_mut::<3, 1>(0, 3).copy_from(&shift);
-        let moved: Vec<Vec3> = boundary
-            .points()
-            .iter()
-            .map(|p| linear * p + shift)
-            .collect();
-        let dice = voxel_dice(&TriMesh::new(moved, boundary.triangles().to_vec())?, mask)?;
+        let (matrix, dice) = candidate(boundary, mask, r * scale, &image, &template)?;
         if dice > best.1 {
             best = (matrix, dice);
         }
@@ -183,11 +201,7 @@ pub fn similarity_between(p: &[Vec3], q: &[Vec3]) -> Result<Matrix4<f64>> {
 /// voxel Dice before and after. When it does not raise the voxel Dice, the identity (and equal
 /// figures) is returned.
 pub fn align_affine(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> {
-    let image = Moments::of(mask)?;
-    let spacing = mask.spacing().min();
-    let (dims, grid) = grid_around(boundary, spacing, 2.0 * spacing)?;
-    let template = Moments::of(&rasterize(boundary, dims, grid)?)?;
-    let voxel_dice_before = voxel_dice(boundary, mask)?;
+    let (image, template, voxel_dice_before) = moments_and_dice(boundary, mask)?;
     let identity = Alignment {
         matrix: Matrix4::identity(),
         scale: 1.0,
@@ -201,15 +215,7 @@ pub fn align_affine(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> {
         return Ok(identity);
     };
     let linear = root_image * inverse_root_template;
-    let mut matrix = linear.to_homogeneous();
-    let shift = image.centroid - linear * template.centroid;
-    matrix.fixed_view_mut::<3, 1>(0, 3).copy_from(&shift);
-    let moved: Vec<Vec3> = boundary
-        .points()
-        .iter()
-        .map(|p| linear * p + shift)
-        .collect();
-    let dice = voxel_dice(&TriMesh::new(moved, boundary.triangles().to_vec())?, mask)?;
+    let (matrix, dice) = candidate(boundary, mask, linear, &image, &template)?;
     if dice <= voxel_dice_before {
         return Ok(identity);
     }
