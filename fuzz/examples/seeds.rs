@@ -26,14 +26,10 @@ const SHIPPED_VTK: [&str; 4] = [
     "../../shared/data/cmrep/t001_template_bcmrep.vtk",
 ];
 
-/// The tetrahedron of the glTF seeds: 4 positions (f32) then 12 u16 indices.
-const TETRA: [[f32; 3]; 4] = [
-    [0.0, 0.0, 0.0],
-    [1.0, 0.0, 0.0],
-    [0.0, 1.0, 0.0],
-    [0.0, 0.0, 1.0],
-];
-const TETRA_INDICES: [u16; 12] = [0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3];
+/// The tetrahedron document and GLB container of the tests (`tests/common/glb.rs`).
+#[allow(dead_code)]
+#[path = "../../tests/common/glb.rs"]
+mod glb;
 
 fn main() {
     let root = PathBuf::from("seeds");
@@ -108,68 +104,19 @@ fn mesh_seeds(root: &Path) {
     let forms = "# forms\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1 1\nvn 0 0 1\nvt 0 0\n\
                  f 1//1 3//1 2//1\nf 1/1 2/1 4/1\nf -4 -1 -2\nf 2/1/1 3/1/1 4/1/1\n";
     put(root, "obj", "forms.obj", forms.as_bytes());
-    let mut buffer: Vec<u8> = TETRA
-        .iter()
-        .flatten()
-        .flat_map(|v| v.to_le_bytes())
-        .collect();
-    buffer.extend(TETRA_INDICES.iter().flat_map(|i| i.to_le_bytes()));
+    let buffer = glb::tetra_buffer();
+    // A mirroring scale on the second instance: the reader must flip its triangles.
+    let document = |buffer: &str| glb::gltf_json(buffer, [-1.0, 1.0, 1.0], 4);
     let uri = base64::engine::general_purpose::STANDARD.encode(&buffer);
     let embedded =
         format!(r#"{{"byteLength": 72, "uri": "data:application/octet-stream;base64,{uri}"}}"#);
-    put(root, "gltf", "tetra.gltf", gltf_json(&embedded).as_bytes());
+    put(root, "gltf", "tetra.gltf", document(&embedded).as_bytes());
     put(
         root,
         "glb",
         "tetra.glb",
-        &glb(&gltf_json(r#"{"byteLength": 72}"#), &buffer),
+        &glb::glb(&document(r#"{"byteLength": 72}"#), &buffer),
     );
-}
-
-/// A glTF document: node 0 = the mesh translated, node 1 = a mirroring scale with child node
-/// 2 = the mesh; `buffer` is the buffer object's JSON.
-fn gltf_json(buffer: &str) -> String {
-    format!(
-        r#"{{
-  "asset": {{"version": "2.0"}},
-  "scene": 0,
-  "scenes": [{{"nodes": [0, 1]}}],
-  "nodes": [
-    {{"mesh": 0, "translation": [10, 0, 0]}},
-    {{"children": [2], "scale": [1, -1, 1]}},
-    {{"mesh": 0, "rotation": [0, 0, 0.7071068, 0.7071068]}}
-  ],
-  "meshes": [{{"name": "tetra", "primitives": [{{"attributes": {{"POSITION": 0}}, "indices": 1, "mode": 4}}]}}],
-  "buffers": [{buffer}],
-  "bufferViews": [
-    {{"buffer": 0, "byteOffset": 0, "byteLength": 48, "target": 34962}},
-    {{"buffer": 0, "byteOffset": 48, "byteLength": 24, "target": 34963}}
-  ],
-  "accessors": [
-    {{"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 1]}},
-    {{"bufferView": 1, "componentType": 5123, "count": 12, "type": "SCALAR"}}
-  ]
-}}"#
-    )
-}
-
-/// The GLB container of `json` (padded with spaces to 4 bytes) and the binary chunk `bin`.
-fn glb(json: &str, bin: &[u8]) -> Vec<u8> {
-    let mut json = json.as_bytes().to_vec();
-    while json.len() % 4 != 0 {
-        json.push(b' ');
-    }
-    let total = 12 + 8 + json.len() + 8 + bin.len();
-    let mut out = b"glTF".to_vec();
-    for word in [2u32, total as u32, json.len() as u32, 0x4E4F_534A] {
-        out.extend_from_slice(&word.to_le_bytes());
-    }
-    out.extend_from_slice(&json);
-    for word in [bin.len() as u32, 0x004E_4942] {
-        out.extend_from_slice(&word.to_le_bytes());
-    }
-    out.extend_from_slice(bin);
-    out
 }
 
 /// Small volumes: an oblique 3×2×2 grid and a 4×3×2 mask with a reflecting axis.

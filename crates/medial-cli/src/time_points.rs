@@ -6,14 +6,14 @@
 
 use crate::error::CliError;
 use medial_core::flow::Trajectory;
-use medial_core::model::fidelity::{FidelitySummary, GroupFidelity};
+use medial_core::model::fidelity::{Fidelity, FidelitySummary, GroupFidelity};
 use medial_core::model::{BallFidelity, MedialConstraints, Model};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::Path;
 
 /// The figures of one time point.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct TimePoint {
     /// `n = 0 … N`.
     pub index: usize,
@@ -29,8 +29,9 @@ pub struct TimePoint {
     pub max_abs_constraint_mm2: f64,
     /// Smallest and largest local thickness (2 × mean spoke length of an atom), mm.
     pub thickness_range_mm: [f64; 2],
-    /// The inscribed-ball fidelity of sheet and free-edge atoms.
-    pub fidelity: FidelitySummary,
+    /// The inscribed-ball fidelity of every atom, with its summary over sheet and free-edge
+    /// atoms (`fidelity.summary`).
+    pub fidelity: Fidelity,
 }
 
 /// The inscribed-ball fidelity of a group of atoms, for JSON: at one time point, or the worst of
@@ -147,7 +148,7 @@ pub fn time_points(model: &Model, trajectory: &Trajectory) -> Vec<TimePoint> {
                     .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], &x| {
                         [lo.min(x), hi.max(x)]
                     }),
-                fidelity: fidelity.measure(q).summary,
+                fidelity: fidelity.measure(q),
             }
         })
         .collect()
@@ -164,7 +165,7 @@ pub fn over_time(points: &[TimePoint]) -> Option<OverTime> {
         min_thickness_mm: -max(|p| -p.thickness_range_mm[0]),
         ball_fidelity: flow
             .iter()
-            .map(|p| BallFigures::of(&p.fidelity))
+            .map(|p| BallFigures::of(&p.fidelity.summary))
             .reduce(BallFigures::worse)?,
     })
 }
@@ -180,7 +181,7 @@ pub fn write_csv(path: &Path, points: &[TimePoint]) -> Result<(), CliError> {
              ball_residual_edge_mean_pct,ball_residual_edge_max_pct,balls_poking_out_edge"
         )?;
         for p in points {
-            let ball = BallFigures::of(&p.fidelity);
+            let ball = BallFigures::of(&p.fidelity.summary);
             writeln!(
                 w,
                 "{},{},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{:e},{},{:e},{:e},{}",

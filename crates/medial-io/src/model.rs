@@ -4,7 +4,8 @@
 use crate::cmrep::template_from_polydata;
 use crate::vtk::{read_polydata, ArrayKind, DataArray, PolyData, ValueType};
 use crate::{Error, Result};
-use medial_core::model::{BallFidelity, Model, SpokeMetrics};
+use medial_core::model::fidelity::Fidelity;
+use medial_core::model::{Model, SpokeMetrics};
 use medial_core::{TriMesh, Vec3};
 use std::path::Path;
 
@@ -69,12 +70,12 @@ pub fn boundary_polydata(model: &Model, q: &[Vec3]) -> PolyData {
 /// The medial triangle mesh at landmarks `q` with the point arrays `Thickness` (2 × mean spoke
 /// length, mm), `SpokeMismatch` (%), `BallResidual` (the inscribed-ball residual
 /// `|d − r| / r`, a fraction) and `BallPokesOut` (1 where the ball pokes out of the boundary,
-/// else 0; see [`medial_core::model::fidelity`]), for a medial template.
-pub fn medial_polydata(model: &Model, q: &[Vec3]) -> Option<PolyData> {
+/// else 0; see [`medial_core::model::fidelity`]), for a medial template; `fidelity` is
+/// [`medial_core::model::BallFidelity::measure`] at `q`, measured once by the caller.
+pub fn medial_polydata(model: &Model, q: &[Vec3], fidelity: &Fidelity) -> Option<PolyData> {
     let t = model.medial()?;
     let m = SpokeMetrics::compute(t, q);
     let nb = t.boundary_count();
-    let fidelity = BallFidelity::new(t).measure(q);
     let pokes_out = fidelity.pokes_out.iter().map(|&p| f64::from(u8::from(p)));
     Some(PolyData {
         points: q[nb..].to_vec(),
@@ -86,7 +87,7 @@ pub fn medial_polydata(model: &Model, q: &[Vec3]) -> Option<PolyData> {
                 m.mismatch.iter().map(|x| 100.0 * x).collect(),
                 ValueType::Double,
             ),
-            scalars("BallResidual", fidelity.residual, ValueType::Double),
+            scalars("BallResidual", fidelity.residual.clone(), ValueType::Double),
             scalars("BallPokesOut", pokes_out.collect(), ValueType::Int),
         ],
         ..PolyData::default()

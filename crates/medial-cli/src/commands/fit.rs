@@ -446,16 +446,15 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         prepared: &prepared,
         planned: &planned,
     };
-    let (resumed, fingerprint) = match options.resume {
-        true => {
-            let fingerprint = Fingerprint::of(config)?;
-            let path = options.out.join(checkpoint::FILE);
-            (
-                Some(Saved::read_for(&path, &fingerprint)?),
-                Some(fingerprint),
-            )
-        }
-        false => (None, None),
+    let (resumed, fingerprint) = if options.resume {
+        let fingerprint = Fingerprint::of(config)?;
+        let path = options.out.join(checkpoint::FILE);
+        (
+            Some(Saved::read_for(&path, &fingerprint)?),
+            Some(fingerprint),
+        )
+    } else {
+        (None, None)
     };
     let mut set = ResultSet::begin(&options.out)?;
     write_text(&set.file("config.toml")?, &config.to_toml(RESOLVED_HEADER)?)?;
@@ -660,6 +659,7 @@ impl Fit<'_> {
         let mut stages = self.stage_summaries(&outcomes, stage_seconds)?;
         let momenta = &outcomes.last().expect("a config has a stage").momenta;
         let trajectory = self.flow.shoot(self.model.landmarks(), momenta)?;
+        let points = time_points(self.model, &trajectory);
         write_results(
             self.config,
             &mut set,
@@ -667,6 +667,7 @@ impl Fit<'_> {
             self.flow,
             momenta,
             &trajectory,
+            &points,
         )?;
         if let Some(lambda) = outcomes.iter().rev().find(|o| !o.lambda.is_empty()) {
             let per_time_point = lambda.lambda.len() / self.flow.time_steps();
@@ -676,7 +677,6 @@ impl Fit<'_> {
                 &lambda.lambda,
             )?;
         }
-        let points = time_points(self.model, &trajectory);
         if !points.is_empty() {
             time_points::write_csv(&set.file("time_points.csv")?, &points)?;
         }
@@ -902,7 +902,9 @@ fn stage_line(name: &str, outcome: &StageOutcome, seconds: f64) -> String {
     )
 }
 
-/// `momenta.npy`, the model at every time point under `flow/`, and the fitted model, into `set`.
+/// `momenta.npy`, the model at every time point under `flow/` (the medial sheet with the
+/// fidelity of `points`, the figures at every time point of a medial template), and the
+/// fitted model, into `set`.
 fn write_results(
     config: &Config,
     set: &mut ResultSet,
@@ -910,6 +912,7 @@ fn write_results(
     flow: &Flow,
     momenta: &[f64],
     trajectory: &Trajectory,
+    points: &[time_points::TimePoint],
 ) -> Result<(), CliError> {
     let k = model.landmarks().len();
     medial_io::npy::write_npy(
@@ -929,7 +932,10 @@ fn write_results(
             &boundary_polydata(model, q),
             vtk_options,
         )?;
-        if let Some(medial) = medial_polydata(model, q) {
+        let medial = points
+            .get(n)
+            .and_then(|p| medial_polydata(model, q, &p.fidelity));
+        if let Some(medial) = medial {
             vtk::write_polydata(
                 &set.file(&format!("flow/medial_t{n:03}.vtk"))?,
                 &medial,
