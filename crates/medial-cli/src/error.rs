@@ -118,6 +118,19 @@ pub enum CliError {
         /// Where it stopped and what was written.
         message: String,
     },
+    /// Another `medial` process is writing a result set into the same folder (its staging
+    /// folder is there and the process runs).
+    #[error(
+        "{}: another medial process (pid {pid}) is writing its results here; wait for it or \
+         give another output folder",
+        dir.display()
+    )]
+    Busy {
+        /// The output folder.
+        dir: PathBuf,
+        /// The other process.
+        pid: u32,
+    },
     /// An operating-system error outside the file layer (creating the output folder).
     #[error("{}: {source}", path.display())]
     Io {

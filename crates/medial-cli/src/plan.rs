@@ -8,6 +8,7 @@ use crate::config::{
     AttachmentKind, Config, ConstraintUnitsConfig, FlowConfig, ModelConfig, OutputConfig,
     StageConfig,
 };
+use medial_core::attachment::varifold::default_width;
 use medial_core::model::template::MedialTemplate;
 use medial_core::synth::PrincipalAxes;
 use medial_core::TriMesh;
@@ -32,8 +33,16 @@ pub enum Target {
     },
     /// Points in correspondence with the template's boundary points.
     Points(PathBuf),
-    /// A surface without correspondence.
-    Surface(PathBuf),
+    /// A surface without correspondence: its file, and the varifold kernel widths (mm) of the
+    /// automatic fit's two stages (see [`varifold_widths`]).
+    Surface {
+        /// The file.
+        path: PathBuf,
+        /// Kernel width of the first stage, mm.
+        width: f64,
+        /// Kernel width of the second, mm.
+        fine_width: f64,
+    },
 }
 
 /// The fit settings of a case's configs.
@@ -86,10 +95,11 @@ impl FitPlan {
     /// - an image: Dice, the image smoothed by 0.4 × its smallest voxel size (0.2 mm at 0.5 mm
     ///   voxels);
     /// - corresponding points: SSD;
-    /// - a surface: varifold, the schedule of points.
+    /// - a surface: varifold, the schedule of points, then a second varifold stage at a
+    ///   narrower kernel ([`varifold_widths`]) from μ = 2000 over 2 AL iterations of 300.
     pub fn automatic(&self, template: PathBuf, target: &Target) -> Config {
         let a = &AUTOMATIC;
-        let stage = match target {
+        let stages = match target {
             Target::Image {
                 path,
                 label,
@@ -99,22 +109,33 @@ impl FitPlan {
                 dice.image = Some(path.clone());
                 dice.label = *label;
                 dice.image_sigma = IMAGE_SIGMA_PER_VOXEL * voxel_mm;
-                dice
+                vec![dice]
             }
             Target::Points(path) => {
                 let mut points = constrained("boundary", AttachmentKind::Ssd, a.points);
                 points.target = Some(path.clone());
                 points.constraints = Some(true);
-                points
+                vec![points]
             }
-            Target::Surface(path) => {
-                let mut surface = constrained("surface", AttachmentKind::Varifold, a.surface);
-                surface.surface = Some(path.clone());
-                surface.constraints = Some(true);
-                surface
+            Target::Surface {
+                path,
+                width,
+                fine_width,
+            } => {
+                let varifold = |name, schedule, width| {
+                    let mut surface = constrained(name, AttachmentKind::Varifold, schedule);
+                    surface.surface = Some(path.clone());
+                    surface.varifold_width = Some(width);
+                    surface.constraints = Some(true);
+                    surface
+                };
+                vec![
+                    varifold("surface", a.surface, *width),
+                    varifold("surface-fine", a.surface_fine, *fine_width),
+                ]
             }
         };
-        let mut config = self.config_of(template, vec![stage]);
+        let mut config = self.config_of(template, stages);
         config.flow.time_steps = a.time_steps;
         config
     }
@@ -202,6 +223,11 @@ struct Automatic {
     /// Against a surface (varifold). Measured on t001-bent against its boundary subdivided and
     /// shuffled: 3 × 150 iterations end at 0.38 mm, 0.66°, 0.83 %.
     surface: Schedule,
+    /// The second varifold stage, at the narrower kernel. Measured on the placenta (cmrep's
+    /// sheet inflated, against its deformed template): after the first stage's 0.735 mm to the
+    /// surface, a quarter of the width ends at 0.544 mm, half of it at 0.635 mm (2 × 300 from
+    /// μ = 2000 each, 620 evaluations).
+    surface_fine: Schedule,
 }
 
 /// Measured on cmrep's t001 under a −35° bend, a 25° twist and an unequal scaling (1.15, 0.9,
@@ -230,7 +256,31 @@ const AUTOMATIC: Automatic = Automatic {
         al_iterations: 3,
         max_iterations: 300,
     },
+    surface_fine: Schedule {
+        mu: 2000.0,
+        al_iterations: 2,
+        max_iterations: 300,
+    },
 };
+
+/// The second varifold stage's kernel width, as a fraction of the first's (see
+/// [`Automatic::surface_fine`]).
+const FINE_WIDTH_FRACTION: f64 = 0.25;
+
+/// The varifold kernel widths (mm) of an automatic fit to the surface `target`: first
+/// [`default_width`] (a tenth of its bounding-box diagonal, at least two mean edges), then
+/// [`FINE_WIDTH_FRACTION`] of it, at least half the longer of the mean edges of the target and
+/// of the template's boundary `boundary` (a kernel much narrower than the triangles sees their
+/// sampling, not the shape). On the placenta a floor of two mean edges (9.9 mm) kept the second
+/// stage from helping (0.715 mm against 0.735), the quarter (3.3 mm, 0.7 mean edges) did.
+pub fn varifold_widths(
+    boundary: &TriMesh,
+    target: &TriMesh,
+) -> Result<(f64, f64), medial_core::Error> {
+    let width = default_width(target)?;
+    let edge = mean_edge(target).max(mean_edge(boundary));
+    Ok((width, (FINE_WIDTH_FRACTION * width).max(0.5 * edge)))
+}
 
 /// A stage with the medial constraints in relative units and μ rising tenfold over the
 /// AL iterations of `schedule`.
@@ -351,7 +401,7 @@ pub fn automatic_plain(template: PathBuf, target: &Target, sigma: f64) -> Option
             points.target = Some(path.clone());
             points
         }
-        Target::Surface(path) => {
+        Target::Surface { path, .. } => {
             let mut surface = StageConfig::new("surface", AttachmentKind::Varifold);
             surface.surface = Some(path.clone());
             surface

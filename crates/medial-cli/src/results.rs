@@ -58,6 +58,16 @@ impl ResultSet {
         Ok(path)
     }
 
+    /// The staging folder: the set's files so far, at their relative paths.
+    pub fn staging(&self) -> &Path {
+        &self.staging
+    }
+
+    /// Adds the file `relative`, already written at its path in the staging folder, to the set.
+    pub fn include(&mut self, relative: &str) {
+        self.files.insert(relative.into());
+    }
+
     /// Moves the finished file `from` (on the same file system) into the set as `relative`.
     pub fn adopt(&mut self, from: &Path, relative: &str) -> Result<(), CliError> {
         let to = self.file(relative)?;
@@ -132,6 +142,12 @@ pub fn clean(dir: &Path) -> Result<(), CliError> {
             let path = entry.path();
             let is_dir = entry.file_type().is_ok_and(|t| t.is_dir());
             if is_dir && name.starts_with(STAGING_PREFIX) {
+                if let Some(pid) = writer_running(&name[STAGING_PREFIX.len()..]) {
+                    return Err(CliError::Busy {
+                        dir: dir.into(),
+                        pid,
+                    });
+                }
                 std::fs::remove_dir_all(&path).map_err(|e| CliError::io(&path, e))?;
             } else if !is_dir && is_leftover(&name) {
                 remove_if_present(&path)?;
@@ -139,6 +155,15 @@ pub fn clean(dir: &Path) -> Result<(), CliError> {
         }
     }
     Ok(())
+}
+
+/// The process id `pid` of a staging folder's name when that process still runs as a program
+/// of this one's name (on Linux, by `/proc/PID/comm`; elsewhere, or for this process's own id,
+/// a staging folder is taken as left over by an interrupted run).
+fn writer_running(pid: &str) -> Option<u32> {
+    let pid: u32 = pid.parse().ok()?;
+    let command = |process: &str| std::fs::read_to_string(format!("/proc/{process}/comm")).ok();
+    (pid != std::process::id() && command(&pid.to_string())? == command("self")?).then_some(pid)
 }
 
 /// A file name an interrupted write leaves: a temporary file of [`medial_io::atomic`]

@@ -19,6 +19,7 @@ use medial_core::fit::optimize::LbfgsOptions;
 use medial_core::flow::{Flow, FlowParams};
 use medial_core::image::rasterize::voxel_dice;
 use medial_core::image::volume::Volume;
+use medial_core::mesh::distance::SurfaceDistance;
 use medial_core::mesh::Bounds;
 use medial_core::model::constraints::{ConstraintUnits, MedialConstraints};
 use medial_core::model::Model;
@@ -54,6 +55,10 @@ pub struct Prepared {
     /// Dice stages: the binary foreground of the image (before smoothing), to report the voxel
     /// overlap of the rasterized model.
     pub mask: Option<Volume>,
+    /// Varifold stages: the target surface, to report the distance of the model's boundary to it.
+    pub surface: Option<SurfaceDistance>,
+    /// Varifold stages: the kernel width in use, mm (given, or chosen from the target surface).
+    pub varifold_width: Option<f64>,
     /// The medial constraints, when they apply.
     pub constraints: Option<MedialConstraints>,
     /// The μ schedule.
@@ -87,11 +92,15 @@ impl Prepared {
     }
 
     /// The figures at the end of a stage: [`Prepared::figures_at`] the end of the flow, with
-    /// the voxel overlap of Dice stages.
+    /// the voxel overlap of Dice stages and the surface distance of varifold stages.
     pub fn end_figures(&self, model: &Model, e: &Evaluation) -> Result<Figures, CliError> {
         let q = &e.final_positions;
         Ok(Figures {
             voxel_dice: self.voxel_dice(model, q)?,
+            surface_distance: self.surface.as_ref().map(|s| {
+                let boundary = &q[..model.boundary_count()];
+                s.mean_distance(boundary)
+            }),
             ..self.figures_at(model, e, q)
         })
     }
@@ -107,27 +116,32 @@ pub fn prepare(stage: &StageConfig, model: &Model) -> Result<Prepared, CliError>
         )));
     }
     let weight = stage.data_weight();
-    let (attachment, ssd, mask, data_weight): (Box<dyn Attachment>, _, _, _) =
-        match stage.attachment {
-            AttachmentKind::Ssd => {
-                let ssd = Ssd::new(ssd_targets(stage, model)?)?;
-                (Box::new(ssd.clone()), Some(ssd), None, weight)
-            }
-            AttachmentKind::Dice => {
-                let (dice, mask) = dice(stage, model)?;
-                (Box::new(dice), None, Some(mask), weight)
-            }
-            AttachmentKind::Varifold => {
-                let varifold = varifold(stage, model)?;
-                let weight = weight / varifold.target_norm2();
-                (Box::new(varifold), None, None, weight)
-            }
-        };
+    let (mut ssd, mut mask, mut surface, mut varifold_width) = (None, None, None, None);
+    let (attachment, data_weight): (Box<dyn Attachment>, _) = match stage.attachment {
+        AttachmentKind::Ssd => {
+            let points = Ssd::new(ssd_targets(stage, model)?)?;
+            (Box::new(ssd.insert(points).clone()), weight)
+        }
+        AttachmentKind::Dice => {
+            let (dice, foreground) = dice(stage, model)?;
+            mask = Some(foreground);
+            (Box::new(dice), weight)
+        }
+        AttachmentKind::Varifold => {
+            let (varifold, target) = varifold(stage, model)?;
+            surface = Some(SurfaceDistance::new(&target)?);
+            varifold_width = Some(varifold.width());
+            let weight = weight / varifold.target_norm2();
+            (Box::new(varifold), weight)
+        }
+    };
     Ok(Prepared {
         data_weight,
         attachment,
         ssd,
         mask,
+        surface,
+        varifold_width,
         constraints: constraints(stage, model, constrained)?,
         schedule: AlSchedule {
             mu: stage.mu,
@@ -209,8 +223,9 @@ fn ssd_targets(stage: &StageConfig, model: &Model) -> Result<Vec<Vec3>, CliError
     Ok(points)
 }
 
-/// The varifold attachment of a stage: the model's boundary against the stage's surface.
-fn varifold(stage: &StageConfig, model: &Model) -> Result<Varifold, CliError> {
+/// The varifold attachment of a stage (the model's boundary against the stage's surface) and
+/// the surface.
+fn varifold(stage: &StageConfig, model: &Model) -> Result<(Varifold, TriMesh), CliError> {
     let path = stage
         .surface
         .as_deref()
@@ -227,13 +242,24 @@ fn varifold(stage: &StageConfig, model: &Model) -> Result<Varifold, CliError> {
         kind,
         width: stage.varifold_width,
     };
-    Varifold::new(
+    let varifold = Varifold::new(
         model.boundary_triangles(),
         model.landmarks().len(),
         &target,
         params,
     )
-    .map_err(|e| CliError::Input(format!("stage '{}': {e}", stage.name)))
+    .map_err(|e| CliError::Input(format!("stage '{}': {e}", stage.name)))?;
+    Ok((varifold, target))
+}
+
+/// `config` with the settings chosen from the data written out (each varifold stage's kernel
+/// width), so that the config a fit writes runs again to the same bits with every value named.
+pub fn with_choices(config: &Config, prepared: &[Prepared]) -> Config {
+    let mut resolved = config.clone();
+    for (stage, p) in resolved.stages.iter_mut().zip(prepared) {
+        stage.varifold_width = stage.varifold_width.or(p.varifold_width);
+    }
+    resolved
 }
 
 /// The Dice attachment of a stage (the image's foreground, smoothed, against the model) and the

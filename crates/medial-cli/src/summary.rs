@@ -30,6 +30,10 @@ pub struct Figures {
     /// Mean distance to the SSD targets (mm), for SSD stages.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub mean_distance: Option<f64>,
+    /// Varifold stages, at the end of a stage: the mean distance (mm) from the model's
+    /// boundary points to the target surface (exact point–triangle distances).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub surface_distance: Option<f64>,
     /// Largest spoke–normal angle at the end of the flow, degrees (medial templates).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_spoke_normal_deg: Option<f64>,
@@ -53,6 +57,7 @@ impl Figures {
             dice: e.dice,
             voxel_dice: None,
             mean_distance,
+            surface_distance: None,
             max_spoke_normal_deg: metrics.map(|m| m.max_spoke_normal_deg),
             mean_spoke_normal_deg: metrics.map(|m| m.mean_spoke_normal_deg),
             max_spoke_mismatch_pct: metrics.map(|m| 100.0 * m.max_spoke_mismatch),

@@ -41,6 +41,10 @@ fn an_automatic_fit_to_a_segmentation_is_medial_and_its_config_reruns_to_the_sam
         assert!(out.join(file).exists(), "{file}");
     }
     let summary = read_summary(&out);
+    for file in ["alignment.txt", "aligned_template.vtk"] {
+        let listed = summary["files"].as_array().unwrap();
+        assert!(listed.iter().any(|f| f == file), "{file} not in the set");
+    }
     let last = &summary["final"];
     println!("automatic toy fit: {summary:#}");
     assert!(["converged", "budget"].contains(&summary["status"].as_str().unwrap()));

@@ -14,7 +14,7 @@
 //!
 //! | module | what it holds | entry points |
 //! |---|---|---|
-//! | [`mesh`] | points, triangle meshes, bounding boxes, midpoint subdivision, closed-surface topology and its defects | [`TriMesh`], [`mesh::Bounds`], [`mesh::topology::MeshDefect`] |
+//! | [`mesh`] | points, triangle meshes, bounding boxes, midpoint subdivision, closed-surface topology and its defects, point–surface distances | [`TriMesh`], [`mesh::Bounds`], [`mesh::topology::MeshDefect`], [`mesh::distance::SurfaceDistance`] |
 //! | [`model`] | the medial template, Loop tangents, medial constraints, spoke metrics, inscribed-ball fidelity | [`MedialTemplate`], [`model::MedialConstraints`], [`model::SpokeMetrics`], [`model::BallFidelity`] |
 //! | [`flow`] | the kernel flow of the landmarks and its exact adjoint; the kernel sums | [`flow::Flow`], [`flow::kernel::GaussianKernel`] |
 //! | [`attachment`] | data terms: SSD to corresponding points, Dice against an image | [`attachment::ssd::Ssd`], [`attachment::dice::DiceAttachment`] |

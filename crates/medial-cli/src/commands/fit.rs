@@ -7,7 +7,7 @@ use crate::config::{AttachmentKind, Config};
 use crate::error::CliError;
 use crate::output::model_error;
 use crate::output::{write_json, write_options, write_text};
-use crate::plan::{plain_sigma, Geometry, Target};
+use crate::plan::{plain_sigma, varifold_widths, Geometry, Target};
 use crate::progress::{Log, LogRow, Progress};
 use crate::results::{create_dir, ResultSet};
 use crate::signals::{Signal, Signals};
@@ -157,10 +157,17 @@ fn target_and_alignment(
                 Target::Points(points.clone()),
             ))
         }
-        (None, None, Some(surface)) => Ok((
-            align_to_surface(boundary, surface, spacing)?,
-            Target::Surface(surface.clone()),
-        )),
+        (None, None, Some(surface)) => {
+            let mesh = medial_io::mesh::read_mesh(surface)?;
+            let (width, fine_width) =
+                varifold_widths(boundary, &mesh).map_err(|e| model_error(surface, e))?;
+            let target = Target::Surface {
+                path: surface.clone(),
+                width,
+                fine_width,
+            };
+            Ok((align_to_surface(boundary, &mesh, surface, spacing)?, target))
+        }
         _ => Err(CliError::Input(
             "without a config, medial fit needs --template and one of --image, --target, \
              --surface"
@@ -208,9 +215,8 @@ fn automatic_plain(
     let sigma = plain_sigma(mesh, &axes);
     let (alignment, target) = target_and_alignment(mesh, inputs, axes.extent.z / 128.0)?;
     create_dir(out)?;
-    medial_io::affine::write_affine(&out.join("alignment.txt"), &alignment)?;
-    let aligned =
-        std::path::absolute(out.join("aligned_template.vtk")).map_err(|e| CliError::io(out, e))?;
+    medial_io::affine::write_affine(&out.join(ALIGNMENT), &alignment)?;
+    let aligned = aligned_template_path(out)?;
     vtk::write_trimesh(
         &aligned,
         &carry_mesh(mesh, &alignment)?,
@@ -295,17 +301,17 @@ fn align_to_points(
 /// open one gets no initial alignment.
 fn align_to_surface(
     boundary: &TriMesh,
+    mesh: &TriMesh,
     surface: &Path,
     spacing: f64,
 ) -> Result<Matrix4<f64>, CliError> {
-    let mesh = medial_io::mesh::read_mesh(surface)?;
-    if let Err(defect) = check_closed_oriented_manifold(&mesh).and_then(|_| check_outward(&mesh)) {
+    if let Err(defect) = check_closed_oriented_manifold(mesh).and_then(|_| check_outward(mesh)) {
         tracing::info!("no initial alignment: the surface is not a closed outward mesh ({defect})");
         return Ok(Matrix4::identity());
     }
     let (dims, grid) =
-        grid_around(&mesh, spacing, 2.0 * spacing).map_err(|e| model_error(surface, e))?;
-    let mask = rasterize(&mesh, dims, grid).map_err(|e| model_error(surface, e))?;
+        grid_around(mesh, spacing, 2.0 * spacing).map_err(|e| model_error(surface, e))?;
+    let mask = rasterize(mesh, dims, grid).map_err(|e| model_error(surface, e))?;
     align_to_image(boundary, &mask, surface)
 }
 
@@ -337,7 +343,7 @@ fn write_aligned(
     out: &Path,
 ) -> Result<PathBuf, CliError> {
     create_dir(out)?;
-    medial_io::affine::write_affine(&out.join("alignment.txt"), alignment)?;
+    medial_io::affine::write_affine(&out.join(ALIGNMENT), alignment)?;
     let mut carried = template.with_landmarks(&carry_points(template.landmarks(), alignment))?;
     let options = ProjectOptions::default();
     let affine = anisotropy(alignment) > AFFINE_ANISOTROPY;
@@ -378,10 +384,36 @@ fn write_aligned(
             Err(e) => tracing::warn!("the template is not medial and its projection failed: {e}"),
         }
     }
-    let aligned =
-        std::path::absolute(out.join("aligned_template.vtk")).map_err(|e| CliError::io(out, e))?;
+    let aligned = aligned_template_path(out)?;
     medial_io::cmrep::write_template(&aligned, &carried, write_options(false))?;
     Ok(aligned)
+}
+
+/// The initial map of an automatic fit, in its output folder.
+const ALIGNMENT: &str = "alignment.txt";
+/// The template an automatic fit starts from (the given one carried by [`ALIGNMENT`]), in its
+/// output folder.
+const ALIGNED_TEMPLATE: &str = "aligned_template.vtk";
+
+/// The absolute path of [`ALIGNED_TEMPLATE`] in `out` (the resolved config names it so).
+fn aligned_template_path(out: &Path) -> Result<PathBuf, CliError> {
+    std::path::absolute(out.join(ALIGNED_TEMPLATE)).map_err(|e| CliError::io(out, e))
+}
+
+/// The files of an automatic fit's initial alignment, written into the output folder before
+/// the fit because its config starts from them, belong to its set: copied into it, they are
+/// listed in `summary.json` (and removed by a later set of another kind).
+fn keep_alignment(set: &mut ResultSet, config: &Config, out: &Path) -> Result<(), CliError> {
+    if config.model.template != aligned_template_path(out)? {
+        return Ok(());
+    }
+    for name in [ALIGNMENT, ALIGNED_TEMPLATE] {
+        let from = out.join(name);
+        if from.exists() {
+            std::fs::copy(&from, set.file(name)?).map_err(|e| CliError::io(&from, e))?;
+        }
+    }
+    Ok(())
 }
 
 /// Options of `medial fit` beyond the config.
@@ -419,6 +451,8 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         .iter()
         .map(|s| stage::prepare(s, &model))
         .collect::<Result<Vec<_>, _>>()?;
+    let resolved = stage::with_choices(config, &prepared);
+    let config = &resolved;
     let planned: Vec<PlannedStage<'_>> = prepared
         .iter()
         .map(|p| PlannedStage {
@@ -457,6 +491,7 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         (None, None)
     };
     let mut set = ResultSet::begin(&options.out)?;
+    keep_alignment(&mut set, config, &options.out)?;
     write_text(&set.file("config.toml")?, &config.to_toml(RESOLVED_HEADER)?)?;
     let ended = fit.optimise(resumed, fingerprint)?;
     fit.write_set(set, ended)
@@ -701,12 +736,16 @@ impl Fit<'_> {
         };
         let mut summary = self.summary(status, seconds, stages, &points);
         log.finish(&mut set)?;
+        // The views are made from the set's own files (as `medial report` makes them from a
+        // fit folder's), in the staging folder with a draft of the summary, and belong to the set.
+        write_json(&set.staging().join("summary.json"), &summary)?;
+        for view in crate::report::write(set.staging())? {
+            set.include(&view);
+        }
         set.commit("summary.json", |path, files| {
             summary.files = files;
             write_json(path, &summary)
         })?;
-        // The views are made from the committed set's files (as `medial report` does).
-        crate::report::write(&self.options.out)?;
         match failure {
             Some(e) => Err(e),
             None => Ok(summary),

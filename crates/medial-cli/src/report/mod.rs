@@ -23,13 +23,15 @@ use folder::{FitFolder, FlowKind};
 use medial_io::vtk::{write_series, SeriesFile};
 use std::path::Path;
 
-/// Writes the series, `flow.glb` and `report.html` of the fit folder `dir` from its files.
+/// Writes the series, `flow.glb` and `report.html` of the fit folder `dir` from its files and
+/// returns their paths relative to `dir` (`/`-separated), in the order written.
 ///
 /// Errors: [`CliError::File`] when `summary.json` or `log.csv` is missing or malformed, a
 /// file under `flow/` cannot be read, or an output cannot be written; [`CliError::Figure`] when
 /// a figure cannot be drawn.
-pub fn write(dir: &Path) -> Result<(), CliError> {
+pub fn write(dir: &Path) -> Result<Vec<String>, CliError> {
     let folder = FitFolder::read(dir)?;
+    let mut written = Vec::new();
     for kind in [FlowKind::Boundary, FlowKind::Medial] {
         let files: Vec<SeriesFile> = folder
             .files(kind)
@@ -40,10 +42,13 @@ pub fn write(dir: &Path) -> Result<(), CliError> {
             })
             .collect();
         if !files.is_empty() {
-            let path = dir.join("flow").join(format!("{}.vtk.series", kind.name()));
-            write_series(&path, &files)?;
+            let relative = format!("flow/{}.vtk.series", kind.name());
+            write_series(&dir.join(&relative), &files)?;
+            written.push(relative);
         }
     }
     animation::write(&folder, &dir.join("flow.glb"))?;
-    write_text(&dir.join("report.html"), &page::render(&folder)?)
+    write_text(&dir.join("report.html"), &page::render(&folder)?)?;
+    written.extend(["flow.glb".into(), "report.html".into()]);
+    Ok(written)
 }

@@ -1,7 +1,9 @@
 //! Triangle meshes: the point type, [`TriMesh`], their bounding boxes ([`Bounds`]), midpoint
-//! subdivision ([`subdivide`]) and their topology ([`topology`]).
+//! subdivision ([`subdivide`]), their topology ([`topology`]) and distances to them
+//! ([`distance`]).
 
 pub mod bounds;
+pub mod distance;
 pub mod subdivide;
 pub mod topology;
 
