@@ -26,6 +26,32 @@ pub enum CliError {
     /// The inputs do not fit together (sizes, stage names, missing arrays).
     #[error("{0}")]
     Input(String),
+    /// The subject table of `medial batch` is wrong (a missing or unknown column, a subject
+    /// name that is not a safe folder name or repeats, a file that does not exist).
+    #[error("{}: {message}", path.display())]
+    Subjects {
+        /// The subject table.
+        path: PathBuf,
+        /// What is wrong, with its line.
+        message: String,
+    },
+    /// Fits of `medial batch` failed; the other subjects were fitted and the cohort gathered.
+    #[error(
+        "{count} of {subjects} subjects failed ({failed}): each one's error is in \
+         {}/SUBJECT/failed.json and its row of {}/cohort.csv",
+        dir.display(),
+        dir.display()
+    )]
+    SubjectsFailed {
+        /// The failed subjects, comma-separated.
+        failed: String,
+        /// How many failed.
+        count: usize,
+        /// Subjects in the table.
+        subjects: usize,
+        /// The cohort folder.
+        dir: PathBuf,
+    },
     /// A command line that clap's rules cannot express is wrong. Exit code 2.
     #[error("{0}")]
     Usage(String),

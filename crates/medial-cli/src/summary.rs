@@ -4,11 +4,11 @@
 use crate::time_points::OverTime;
 use medial_core::fit::objective::Evaluation;
 use medial_core::model::metrics::SpokeMetrics;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The figures of a configuration, as in `summary.json` (`final` and each stage) and the
 /// output of `medial eval`. Kinetic energy and data term are unweighted.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Figures {
     /// `E_AL`.
     pub total: f64,
@@ -102,7 +102,7 @@ pub struct StageSummary {
 }
 
 /// How a fit ended, best first.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Status {
     /// Every stage ran; the last one converged and met its constraint tolerances.

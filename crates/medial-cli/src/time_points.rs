@@ -9,7 +9,7 @@ use medial_core::flow::Trajectory;
 use medial_core::model::fidelity::{Fidelity, FidelitySummary, GroupFidelity};
 use medial_core::model::{BallFidelity, MedialConstraints, Model};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// The figures of one time point.
@@ -36,7 +36,7 @@ pub struct TimePoint {
 
 /// The inscribed-ball fidelity of a group of atoms, for JSON: at one time point, or the worst of
 /// each figure over time points.
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct GroupFigures {
     /// Atoms in the group.
     pub atoms: usize,
@@ -49,7 +49,7 @@ pub struct GroupFigures {
 }
 
 /// The inscribed-ball fidelity of sheet atoms (two or three spokes) and free-edge atoms (one).
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct BallFigures {
     /// Sheet and seam atoms.
     pub sheet: GroupFigures,
@@ -104,7 +104,7 @@ impl BallFigures {
 }
 
 /// The worst figures over time points `1 … N` (time point 0, the template, is not optimised).
-#[derive(Clone, Copy, Debug, Serialize)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct OverTime {
     /// Largest spoke–normal angle at any time point, degrees.
     pub max_spoke_normal_deg: f64,

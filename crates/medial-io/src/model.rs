@@ -2,7 +2,7 @@
 //! configuration of its landmarks with the medial figures as point arrays, for ParaView.
 
 use crate::cmrep::template_from_polydata;
-use crate::vtk::{read_polydata, ArrayKind, DataArray, PolyData, ValueType};
+use crate::vtk::{read_polydata, DataArray, PolyData, ValueType};
 use crate::{Error, Result};
 use medial_core::model::fidelity::Fidelity;
 use medial_core::model::{Model, SpokeMetrics};
@@ -45,18 +45,18 @@ pub fn boundary_polydata(model: &Model, q: &[Vec3]) -> PolyData {
             let m = SpokeMetrics::compute(t, q);
             let atom = t.medial_index();
             data.point_data = vec![
-                scalars(
+                DataArray::scalars(
                     "SpokeNormalAngle",
                     m.spoke_normal_deg.clone(),
                     ValueType::Double,
                 ),
-                scalars(
+                DataArray::scalars(
                     "SpokeMismatch",
                     atom.iter().map(|&a| 100.0 * m.mismatch[a]).collect(),
                     ValueType::Double,
                 ),
-                scalars("Radius", m.spoke_length.clone(), ValueType::Double),
-                scalars(
+                DataArray::scalars("Radius", m.spoke_length.clone(), ValueType::Double),
+                DataArray::scalars(
                     "MedialIndex",
                     atom.iter().map(|&a| a as f64).collect(),
                     ValueType::Int,
@@ -81,14 +81,14 @@ pub fn medial_polydata(model: &Model, q: &[Vec3], fidelity: &Fidelity) -> Option
         points: q[nb..].to_vec(),
         polygons: cells(t.medial_triangles()),
         point_data: vec![
-            scalars("Thickness", m.thickness, ValueType::Double),
-            scalars(
+            DataArray::scalars("Thickness", m.thickness, ValueType::Double),
+            DataArray::scalars(
                 "SpokeMismatch",
                 m.mismatch.iter().map(|x| 100.0 * x).collect(),
                 ValueType::Double,
             ),
-            scalars("BallResidual", fidelity.residual.clone(), ValueType::Double),
-            scalars("BallPokesOut", pokes_out.collect(), ValueType::Int),
+            DataArray::scalars("BallResidual", fidelity.residual.clone(), ValueType::Double),
+            DataArray::scalars("BallPokesOut", pokes_out.collect(), ValueType::Int),
         ],
         ..PolyData::default()
     })
@@ -96,14 +96,4 @@ pub fn medial_polydata(model: &Model, q: &[Vec3], fidelity: &Fidelity) -> Option
 
 fn cells(triangles: &[[usize; 3]]) -> Vec<Vec<usize>> {
     triangles.iter().map(|t| t.to_vec()).collect()
-}
-
-fn scalars(name: &str, values: Vec<f64>, value_type: ValueType) -> DataArray {
-    DataArray {
-        name: name.into(),
-        components: 1,
-        values,
-        kind: ArrayKind::Scalars,
-        value_type,
-    }
 }

@@ -1,11 +1,13 @@
 //! The commands of `medial`, one module each: [`fit`] and [`eval`] run a TOML schedule;
 //! [`inflate`], [`project`] and [`synth`] build templates and synthetic cases; [`rasterize`]
 //! turns a closed mesh into a mask; [`report`] writes the views of a fit folder again;
-//! [`check`] measures whether the medial points stay the centres of inscribed balls.
+//! [`check`] measures whether the medial points stay the centres of inscribed balls;
+//! [`batch`] fits a cohort of subjects and gathers it.
 
+mod batch;
 mod check;
 mod eval;
-mod fit;
+pub mod fit;
 mod inflate;
 mod project;
 mod rasterize;
@@ -96,6 +98,12 @@ pub enum Command {
     /// Write report.html, flow.glb and the ParaView series (flow/*.vtk.series) of a fit folder
     /// again from its files.
     Report(report::ReportArgs),
+    /// Fit every subject of SUBJECTS.csv from one template into DIR/SUBJECT/ (as `medial fit`
+    /// does; subjects fitted earlier are skipped, interrupted ones resumed, failed ones
+    /// recorded in DIR/SUBJECT/failed.json while the others go on), then gather DIR/cohort.csv,
+    /// DIR/thickness.npy [subjects × atoms] and DIR/thickness_mean.vtk; exit code 1 if a subject
+    /// failed. --shard I/N or a Slurm array task fits a share; --slurm writes Slurm job scripts.
+    Batch(batch::BatchArgs),
     /// Measure whether the medial points of a template, or of a fit at every time point, stay
     /// the centres of balls inscribed in the boundary (residual |d − r| / r, balls poking out);
     /// prints JSON, exits with code 5 past --max-residual.
@@ -183,6 +191,7 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
         Command::Rasterize(args) => rasterize::run(&args)?,
         Command::Report(args) => report::run(&args)?,
         Command::Check(args) => check::run(&args)?,
+        Command::Batch(args) => batch::run(&args, threads, quiet)?,
     }
     Ok(())
 }

@@ -49,6 +49,19 @@ pub struct DataArray {
     pub value_type: ValueType,
 }
 
+impl DataArray {
+    /// A one-component `SCALARS` array `name` of `values` stored as `value_type`.
+    pub fn scalars(name: &str, values: Vec<f64>, value_type: ValueType) -> Self {
+        Self {
+            name: name.into(),
+            components: 1,
+            values,
+            kind: ArrayKind::Scalars,
+            value_type,
+        }
+    }
+}
+
 /// Legacy VTK `DATASET POLYDATA`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PolyData {
