@@ -739,7 +739,7 @@ impl Fit<'_> {
         // The views are made from the set's own files (as `medial report` makes them from a
         // fit folder's), in the staging folder with a draft of the summary, and belong to the set.
         write_json(&set.staging().join("summary.json"), &summary)?;
-        for view in crate::report::write(set.staging())? {
+        for view in crate::report::write(set.staging(), &self.options.out)? {
             set.include(&view);
         }
         set.commit("summary.json", |path, files| {

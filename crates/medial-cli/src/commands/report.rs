@@ -15,7 +15,7 @@ pub struct ReportArgs {
 
 /// Writes `DIR/report.html`, `DIR/flow.glb` and `DIR/flow/*.vtk.series`.
 pub fn run(args: &ReportArgs) -> Result<(), CliError> {
-    crate::report::write(&args.dir)?;
+    crate::report::write(&args.dir, &args.dir)?;
     eprintln!("report in {}", args.dir.join("report.html").display());
     Ok(())
 }

@@ -42,6 +42,8 @@ pub struct FlowFile {
 pub struct FitFolder {
     /// The folder.
     pub dir: PathBuf,
+    /// The name the report gives the fit: its result folder's.
+    pub name: String,
     /// `summary.json`.
     pub summary: Value,
     /// `log.csv`: one row per L-BFGS iteration.
@@ -57,11 +59,12 @@ pub struct FitFolder {
 }
 
 impl FitFolder {
-    /// Reads the files of the fit folder `dir`.
+    /// Reads the files of the fit folder `dir`, whose results belong to the folder `shown`
+    /// (`dir` itself, or the result folder whose staging folder `dir` is).
     ///
     /// Errors: [`CliError::File`] when `summary.json` or `log.csv` is missing or malformed,
     /// `summary.json` lacks a positive `time_steps`, or `time_points.csv` is malformed.
-    pub fn read(dir: &Path) -> Result<Self, CliError> {
+    pub fn read(dir: &Path, shown: &Path) -> Result<Self, CliError> {
         let summary_path = dir.join("summary.json");
         let text = std::fs::read_to_string(&summary_path)
             .map_err(|e| medial_io::Error::io(&summary_path, e))?;
@@ -74,6 +77,10 @@ impl FitFolder {
         let optional = |name: &str| Some(dir.join(name)).filter(|p| p.exists());
         Ok(Self {
             dir: dir.to_path_buf(),
+            name: shown.file_name().map_or_else(
+                || shown.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            ),
             log: Table::read(&dir.join("log.csv"))?,
             time_points: optional("time_points.csv")
                 .map(|p| Table::read(&p))

@@ -24,13 +24,14 @@ use medial_io::vtk::{write_series, SeriesFile};
 use std::path::Path;
 
 /// Writes the series, `flow.glb` and `report.html` of the fit folder `dir` from its files and
-/// returns their paths relative to `dir` (`/`-separated), in the order written.
+/// returns their paths relative to `dir` (`/`-separated), in the order written; the report
+/// names the fit by the folder `shown` (`dir`, or the result folder `dir` stages for).
 ///
 /// Errors: [`CliError::File`] when `summary.json` or `log.csv` is missing or malformed, a
 /// file under `flow/` cannot be read, or an output cannot be written; [`CliError::Figure`] when
 /// a figure cannot be drawn.
-pub fn write(dir: &Path) -> Result<Vec<String>, CliError> {
-    let folder = FitFolder::read(dir)?;
+pub fn write(dir: &Path, shown: &Path) -> Result<Vec<String>, CliError> {
+    let folder = FitFolder::read(dir, shown)?;
     let mut written = Vec::new();
     for kind in [FlowKind::Boundary, FlowKind::Medial] {
         let files: Vec<SeriesFile> = folder

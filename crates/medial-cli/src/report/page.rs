@@ -37,11 +37,7 @@ pre{background:#f7f7f7;padding:1em;overflow-x:auto;font-size:0.85em}\
 ///
 /// Errors: [`CliError::Figure`] when a figure cannot be drawn.
 pub fn render(folder: &FitFolder) -> Result<String, CliError> {
-    let name = folder
-        .dir
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| folder.dir.display().to_string());
+    let name = &folder.name;
     let status = folder.summary["status"].as_str().unwrap_or("unknown");
     let page = html! {
         (DOCTYPE)
@@ -124,7 +120,7 @@ fn object_title(key: &str) -> String {
     }
 }
 
-/// The fit's scalar entries, then one table per object of `summary.json` (`final`,
+/// The fit's scalar entries (but the list of files), then one table per object of `summary.json` (`final`,
 /// `over_time`, and whatever else it holds), then the stages side by side.
 fn summary_tables(summary: &Value) -> Markup {
     let Some(map) = summary.as_object() else {
@@ -149,7 +145,9 @@ fn summary_tables(summary: &Value) -> Markup {
     let skip: Vec<&str> = objects
         .iter()
         .map(|k| k.as_str())
-        .chain(["stages", "status"])
+        // `files` lists the set, not a figure (and a report made in the staging folder is
+        // made before the list is final).
+        .chain(["stages", "status", "files"])
         .collect();
     html! {
         h2 { "Fit" }
