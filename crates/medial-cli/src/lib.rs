@@ -2,10 +2,11 @@
 //! [`main`]; the library exists so that the fuzz targets (`fuzz/`) reach the config parser.
 //!
 //! Data flows one way: [`config`] reads a TOML schedule, [`stage`] assembles what the engine runs,
-//! the [`commands`] run it, and [`summary`], [`progress`], [`time_points`] and [`output`] write
-//! what a user reads, as one set of files ([`results`]). A fit stopped by a signal
+//! the [`commands`] run it, and [`summary`], [`progress`], [`time_points`], [`atoms`] and
+//! [`output`] write what a user reads, as one set of files ([`results`]). A fit stopped by a signal
 //! ([`signals`]) leaves a [`checkpoint`] to resume from.
 
+mod atoms;
 mod checkpoint;
 mod commands;
 pub mod config;
