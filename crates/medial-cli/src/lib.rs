@@ -2,11 +2,12 @@
 //! [`main`]; the library exists so that the fuzz targets (`fuzz/`) reach the config parser.
 //!
 //! Data flows one way: [`config`] reads a TOML schedule, [`stage`] assembles what the engine runs,
-//! the [`commands`] run it, and [`summary`], [`progress`], [`time_points`] and [`output`] write
-//! what a user reads, as one set of files ([`results`]). A fit stopped by a signal
-//! ([`signals`]) leaves a [`checkpoint`] to resume from. A [`cohort`] is many fits of one
+//! the [`commands`] run it, and [`summary`], [`progress`], [`time_points`], [`atoms`] and
+//! [`output`] write what a user reads, as one set of files ([`results`]). A fit stopped by a
+//! signal ([`signals`]) leaves a [`checkpoint`] to resume from. A [`cohort`] is many fits of one
 //! template, run by `medial batch` (on a Slurm cluster too) and gathered into tables.
 
+mod atoms;
 mod checkpoint;
 mod cohort;
 mod commands;

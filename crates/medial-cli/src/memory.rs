@@ -21,7 +21,10 @@
 //!   gradient sums of each chunk of 128 triangles) + `32·V` (the image read, its mask, its
 //!   smoothed copy and the working copy of the smoothing or of the final rasterization);
 //! * **a grid to rasterize** ([`Estimate::grid`]), `V` voxels: `24·V` (the `f64` volume, the
-//!   buffer its slices are collected in, the 8-bit copy written).
+//!   buffer its slices are collected in, the 8-bit copy written);
+//! * **a pull-back of `medial apply`** ([`Estimate::pull_back`]), `V` voxels of the output grid:
+//!   `128·V` (the voxel centres and the points they map to, their displacements and the warp's
+//!   values, 24 B each; the resampled values and the bytes written, 8 B each).
 
 use crate::config::{Config, StageConfig};
 use crate::error::CliError;
@@ -38,6 +41,9 @@ const FLOW_VECTORS: f64 = 20.0;
 
 /// Constraints per landmark, at most (see the module doc).
 const CONSTRAINTS_PER_LANDMARK: f64 = 3.0;
+
+/// Bytes per voxel of a pull-back (see the module doc).
+const PULL_BACK_BYTES: f64 = 128.0;
 
 /// Triangles per chunk of the Dice sums (`medial_core::attachment::dice`).
 const DICE_CHUNK: f64 = 128.0;
@@ -160,6 +166,13 @@ impl Estimate {
         }
     }
 
+    /// Pulling an image back on a grid of `voxels` voxels (and its warp).
+    pub fn pull_back(voxels: usize) -> Self {
+        Self {
+            parts: vec![("voxels", PULL_BACK_BYTES * voxels as f64)],
+        }
+    }
+
     /// The total, bytes.
     pub fn total(&self) -> f64 {
         self.parts.iter().map(|(_, b)| b).sum()
@@ -236,6 +249,7 @@ mod tests {
         assert_eq!(flow.total(), 8.0 * 3000.0 * 31.0 + 8.0 * 3000.0 * 4.0);
         let grid = Estimate::grid([10, 20, 30]);
         assert_eq!(grid.total(), 24.0 * 6000.0);
+        assert_eq!(Estimate::pull_back(1000).total(), 128_000.0);
         let mut stage = StageConfig::new("dice", AttachmentKind::Dice);
         stage.subdivision = 1;
         stage.layers = 2;

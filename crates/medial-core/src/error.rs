@@ -37,6 +37,10 @@ pub enum Error {
     /// A parameter outside its valid range.
     #[error("invalid parameter: {0}")]
     InvalidParameter(String),
+    /// A map of space cannot be inverted where it was asked to be (the inverse flow of a point
+    /// did not converge).
+    #[error("not invertible: {0}")]
+    NotInvertible(String),
     /// The optimiser failed (not merely stopped early).
     #[error("optimisation failed: {0}")]
     Optimisation(String),

@@ -17,6 +17,7 @@
 //! | [`mesh`] | points, triangle meshes, bounding boxes, midpoint subdivision, closed-surface topology and its defects, point–surface distances | [`TriMesh`], [`mesh::Bounds`], [`mesh::topology::MeshDefect`], [`mesh::distance::SurfaceDistance`] |
 //! | [`model`] | the medial template, Loop tangents, medial constraints, spoke metrics, inscribed-ball fidelity | [`MedialTemplate`], [`model::MedialConstraints`], [`model::SpokeMetrics`], [`model::BallFidelity`] |
 //! | [`flow`] | the kernel flow of the landmarks and its exact adjoint; the kernel sums | [`flow::Flow`], [`flow::kernel::GaussianKernel`] |
+//! | [`flow::ambient`] | the fitted flow of any point of space, forward and inverse | [`flow::ambient::AmbientFlow`] |
 //! | [`attachment`] | data terms: SSD to corresponding points, Dice against an image | [`attachment::ssd::Ssd`], [`attachment::dice::DiceAttachment`] |
 //! | [`attachment::varifold`] | surfaces without correspondence: varifold, oriented varifold, current | [`attachment::varifold::Varifold`], [`attachment::varifold::default_width`] |
 //! | [`image`] | volumes in world space, rasterization of closed meshes | [`image::Volume`], [`image::rasterize`] |

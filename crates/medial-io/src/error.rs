@@ -125,6 +125,18 @@ pub enum Geometry {
         /// Its size.
         size: usize,
     },
+    /// A displacement field whose dimensions are not `[nx, ny, nz, 1, 3]` (NIfTI `dim[5]`
+    /// holds the 3 components of a vector).
+    #[error(
+        "the image is {ndim}-D with {components} value(s) per voxel: a displacement field has \
+         dimensions [nx, ny, nz, 1, 3]"
+    )]
+    NotVectors {
+        /// The number of dimensions.
+        ndim: usize,
+        /// The values per voxel (`dim[5]`, 1 below 5 dimensions).
+        components: usize,
+    },
     /// A dimension of size 0 (or negative).
     #[error("dimension {axis} has size {size}: every dimension needs at least one voxel")]
     EmptyDimension {

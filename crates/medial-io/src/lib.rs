@@ -18,8 +18,9 @@
 //! | [`cmrep`] | cmrep boundary medial templates ⇄ [`MedialTemplate`](medial_core::MedialTemplate) | [`cmrep::read_template`], [`cmrep::write_template`] |
 //! | [`mesh`] | triangle meshes chosen by extension: `.vtk`, `.obj`, `.gltf`/`.glb`; point sets | [`mesh::read_mesh`], [`mesh::write_mesh`], [`mesh::read_points`] |
 //! | [`volume`] | a volume in any supported format, by file name; the grid checks every volume reader applies | [`volume::read_volume`], [`volume::check_grid`] |
-//! | [`nifti_volume`] | NIfTI-1 volumes (`.nii`, `.nii.gz`) | [`nifti_volume::read_nifti`], [`nifti_volume::write_nifti`] |
+//! | [`nifti_volume`] | NIfTI-1 volumes (`.nii`, `.nii.gz`), with their voxel type | [`nifti_volume::read_nifti`], [`nifti_volume::read_nifti_file`], [`nifti_volume::write_nifti`] |
 //! | [`exr_volume`] | volumes as OpenEXR images (a column of slices) | [`exr_volume::read_exr_volume`], [`exr_volume::write_exr_volume`] |
+//! | [`warp`] | displacement fields as NIfTI warps (5-D, vector intent, LPS) for ITK, ANTs and greedy | [`warp::write_warp`], [`warp::read_warp`] |
 //! | [`npy`] | NumPy `.npy` arrays as `f64` | [`npy::read_npy`], [`npy::write_npy`] |
 //! | [`affine`] | 4×4 affine matrices as text | [`affine::read_affine`], [`affine::write_affine`] |
 //! | [`model`] | the model a fit deforms (medial template or plain mesh) and its VTK at a configuration of its landmarks | [`model::read_model`], [`model::boundary_polydata`], [`model::medial_polydata`] |
@@ -42,5 +43,6 @@ pub mod npy;
 pub mod sheet;
 pub mod volume;
 pub mod vtk;
+pub mod warp;
 
 pub use error::{Error, Result};

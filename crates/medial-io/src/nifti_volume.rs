@@ -65,6 +65,8 @@ pub enum NiftiType {
     U8,
     /// `DT_INT16`: integers −32768 … 32767.
     I16,
+    /// `DT_INT32`: integers −2³¹ … 2³¹ − 1 (label maps with many labels).
+    I32,
     /// `DT_FLOAT32`: values rounded to single precision.
     F32,
     /// `DT_FLOAT64`: values stored exactly.
@@ -81,24 +83,108 @@ pub enum NiftiType {
 /// [`Error::Geometry`] for a grid that cannot place voxels in the world; [`Error::Model`] for
 /// values the engine refuses (NaN voxels).
 pub fn read_nifti(path: &Path) -> Result<Volume> {
+    Ok(read_nifti_file(path)?.volume)
+}
+
+/// A volume read from a NIfTI-1 file, with what its voxel type says about its values.
+#[derive(Clone, Debug)]
+pub struct NiftiFile {
+    /// The volume.
+    pub volume: Volume,
+    /// Whether the values are labels: an integer datatype, scaled (if at all) by an integer
+    /// `scl_slope` and `scl_inter`.
+    pub labels: bool,
+    /// The type [`write_nifti`] stores such values in without loss: the file's own for `uint8`,
+    /// `int16`, `float32` and `float64`, `int16` for `int8`, `int32` for `uint16` and `int32`,
+    /// `float64` for the wider integers and scaled values.
+    pub datatype: NiftiType,
+}
+
+/// Reads a `.nii` or `.nii.gz` volume as [`read_nifti`], with its voxel type.
+///
+/// Errors: as [`read_nifti`].
+pub fn read_nifti_file(path: &Path) -> Result<NiftiFile> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    parse_nifti(bytes, path)
+    let decoded = decode(bytes, path, Voxel::Scalar)?;
+    let (labels, datatype) = stored_type(&decoded.header, decoded.datatype);
+    let volume = Volume::new(decoded.dims, decoded.data, decoded.voxel_to_world)
+        .map_err(|e| Error::model(path, e))?;
+    Ok(NiftiFile {
+        volume,
+        labels,
+        datatype,
+    })
+}
+
+/// Whether values of `datatype` scaled by the header are labels, and the type that stores them
+/// (see [`NiftiFile`]).
+fn stored_type(header: &NiftiHeader, datatype: nifti::NiftiType) -> (bool, NiftiType) {
+    use nifti::NiftiType as T;
+    let scaled = header.scl_slope != 0.0 && (header.scl_slope != 1.0 || header.scl_inter != 0.0);
+    let integral_scale = header.scl_slope.fract() == 0.0 && header.scl_inter.fract() == 0.0;
+    let integer = !matches!(datatype, T::Float32 | T::Float64);
+    let stored = match datatype {
+        _ if scaled => NiftiType::F64,
+        T::Uint8 => NiftiType::U8,
+        T::Int8 | T::Int16 => NiftiType::I16,
+        T::Uint16 | T::Int32 => NiftiType::I32,
+        T::Float32 => NiftiType::F32,
+        _ => NiftiType::F64,
+    };
+    (integer && (!scaled || integral_scale), stored)
 }
 
 /// Parses the bytes of a `.nii` or `.nii.gz` file (gzip by its magic number, not the name) as
-/// [`read_nifti`] does (`path` is only used in error messages). A gzip stream is inflated only
-/// as far as the header declares (header, then `vox_offset` and the voxel data), so that a
-/// small file cannot fill the memory; the rest of the stream is checked without being kept.
+/// [`read_nifti`] does (`path` is only used in error messages).
 ///
 /// Errors: as [`read_nifti`], but for [`Error::Io`].
 pub fn parse_nifti(bytes: Vec<u8>, path: &Path) -> Result<Volume> {
+    let decoded = decode(bytes, path, Voxel::Scalar)?;
+    Volume::new(decoded.dims, decoded.data, decoded.voxel_to_world)
+        .map_err(|e| Error::model(path, e))
+}
+
+/// What a voxel of a file holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Voxel {
+    /// One value: a 3-D image (or 4-D with one volume).
+    Scalar,
+    /// A 3-vector: a 5-D image of dimensions `[nx, ny, nz, 1, 3]` (components along `dim[5]`).
+    Vector,
+}
+
+impl Voxel {
+    /// Values per voxel.
+    fn values(self) -> usize {
+        match self {
+            Voxel::Scalar => 1,
+            Voxel::Vector => 3,
+        }
+    }
+}
+
+/// The content of a NIfTI-1 file, checked: its header and datatype, grid, voxel-to-world map
+/// (RAS mm) and values as `f64`, `x` fastest then (for vectors) the component.
+pub(crate) struct Decoded {
+    pub(crate) header: NiftiHeader,
+    pub(crate) datatype: nifti::NiftiType,
+    pub(crate) dims: [usize; 3],
+    pub(crate) voxel_to_world: Matrix4<f64>,
+    pub(crate) data: Vec<f64>,
+}
+
+/// Decodes the bytes of a `.nii` or `.nii.gz` file whose voxels hold `voxel` (module doc). A
+/// gzip stream is inflated only as far as the header declares (header, then `vox_offset` and
+/// the voxel data), so that a small file cannot fill the memory; the rest of the stream is
+/// checked without being kept.
+pub(crate) fn decode(bytes: Vec<u8>, path: &Path, voxel: Voxel) -> Result<Decoded> {
     if !bytes.starts_with(&GZIP_MAGIC) {
-        return volume_from(bytes, path, |_, _| Ok(()));
+        return decode_from(bytes, path, voxel, |_, _| Ok(()));
     }
     let mut decoder = flate2::read::GzDecoder::new(bytes.as_slice());
     let mut head = Vec::new();
     inflate(&mut decoder, &mut head, HEADER_BYTES, path)?;
-    volume_from(head, path, |file, end| {
+    decode_from(head, path, voxel, |file, end| {
         inflate(&mut decoder, file, end, path)?;
         // The end of the stream (and its checksum) is checked, what follows the data dropped.
         std::io::copy(&mut decoder, &mut std::io::sink())
@@ -107,24 +193,26 @@ pub fn parse_nifti(bytes: Vec<u8>, path: &Path) -> Result<Volume> {
     })
 }
 
-/// The volume of a NIfTI-1 file whose first bytes are `bytes`; `more(bytes, end)` appends
+/// The content of a NIfTI-1 file whose first bytes are `bytes`; `more(bytes, end)` appends
 /// the file's next bytes up to `end` in all (fewer where the file ends), once the header told
 /// where its voxel data end.
-fn volume_from(
+fn decode_from(
     mut bytes: Vec<u8>,
     path: &Path,
+    voxel: Voxel,
     mut more: impl FnMut(&mut Vec<u8>, usize) -> Result<()>,
-) -> Result<Volume> {
+) -> Result<Decoded> {
     let header = parse_header(&bytes, path)?;
     let datatype = check_datatype(&header).map_err(|m| Error::format(path, m))?;
-    let dims = spatial_dims(&header, path)?;
-    let affine = voxel_to_world(&header).map_err(|problem| Error::Geometry {
+    let dims = spatial_dims(&header, path, voxel)?;
+    let voxel_to_world = voxel_to_world(&header).map_err(|problem| Error::Geometry {
         path: path.into(),
         problem,
     })?;
-    check_grid(path, dims, &affine)?;
-    more(&mut bytes, data_end(&header, dims, datatype))?;
-    let data = voxel_data_range(&header, bytes.len(), dims, datatype, path)?;
+    check_grid(path, dims, &voxel_to_world)?;
+    let values = dims.iter().product::<usize>() * voxel.values();
+    more(&mut bytes, data_end(&header, values, datatype))?;
+    let data = voxel_data_range(&header, bytes.len(), dims, values, datatype, path)?;
     bytes.truncate(data.end);
     bytes.drain(..data.start);
     let volume = nifti::InMemNiftiVolume::from_raw_fields(
@@ -146,7 +234,13 @@ fn volume_from(
     if contiguous != Some(data.len()) || offset.unwrap_or(0) != 0 {
         return Err(Error::format(path, "voxel data are not contiguous"));
     }
-    Volume::new(dims, data, affine).map_err(|e| Error::model(path, e))
+    Ok(Decoded {
+        header,
+        datatype,
+        dims,
+        voxel_to_world,
+        data,
+    })
 }
 
 /// Appends the bytes of `decoder` to `out` until it holds `end` bytes or the stream ends.
@@ -190,9 +284,9 @@ fn parse_header(bytes: &[u8], path: &Path) -> Result<NiftiHeader> {
 }
 
 /// Where the voxel data end, bytes from the start of the (decompressed) file, if `vox_offset`
-/// places them in it: `max(vox_offset, 352) + nx·ny·nz·size`, saturating.
-fn data_end(header: &NiftiHeader, dims: [usize; 3], datatype: nifti::NiftiType) -> usize {
-    data_start(header).saturating_add(data_bytes(dims, datatype))
+/// places them in it: `max(vox_offset, 352) + values·size`, saturating.
+fn data_end(header: &NiftiHeader, values: usize, datatype: nifti::NiftiType) -> usize {
+    data_start(header).saturating_add(values * datatype.size_of())
 }
 
 /// `max(vox_offset, 352)` (saturating; a negative or NaN offset gives 352).
@@ -200,17 +294,14 @@ fn data_start(header: &NiftiHeader) -> usize {
     (header.vox_offset as usize).max(MIN_DATA_OFFSET)
 }
 
-/// `nx·ny·nz·size` of the voxel data (at most 32767³ · 16 bytes: no overflow).
-fn data_bytes(dims: [usize; 3], datatype: nifti::NiftiType) -> usize {
-    dims.iter().product::<usize>() * datatype.size_of()
-}
-
 /// Where the voxel data lie in the (decompressed) file of `len` bytes: from `vox_offset` (at
-/// least [`MIN_DATA_OFFSET`]) for `nx·ny·nz` values of `datatype`.
+/// least [`MIN_DATA_OFFSET`]) for `values` values of `datatype` (`nx·ny·nz` per component; at
+/// most 3·32767³ · 16 bytes: no overflow).
 fn voxel_data_range(
     header: &NiftiHeader,
     len: usize,
     dims: [usize; 3],
+    values: usize,
     datatype: nifti::NiftiType,
     path: &Path,
 ) -> Result<Range<usize>> {
@@ -224,13 +315,16 @@ fn voxel_data_range(
         });
     }
     let start = data_start(header);
-    let needed = data_bytes(dims, datatype);
+    let needed = values * datatype.size_of();
     let available = len.saturating_sub(start);
     if available < needed {
         let [nx, ny, nz] = dims;
         return Err(Error::Truncated {
             path: path.into(),
-            what: format!("a {nx}×{ny}×{nz} volume of {datatype:?} from byte {start}"),
+            what: format!(
+                "a {nx}×{ny}×{nz}{} volume of {datatype:?} from byte {start}",
+                if values > nx * ny * nz { "×3" } else { "" }
+            ),
             needed: needed as u64,
             available: available as u64,
         });
@@ -242,9 +336,24 @@ fn voxel_data_range(
 /// the module doc for the header).
 ///
 /// Errors: [`Error::Format`] for another extension, a dimension above 32767, or a value that
-/// the datatype cannot hold (non-integer or out of range for `U8`/`I16`, beyond the `f32` range
+/// the datatype cannot hold (non-integer or out of range for the integer types, beyond the `f32` range
 /// for `F32`); [`Error::Io`] if the file cannot be written.
 pub fn write_nifti(path: &Path, volume: &Volume, datatype: NiftiType) -> Result<()> {
+    let header = header_for(volume, datatype);
+    write_raw(path, header, volume.dims(), volume.data(), datatype)
+}
+
+/// Writes `values` (`x` fastest, then along `dim[4…]` as `header.dim` says) with the fields of
+/// `header` as `.nii` or `.nii.gz` (by the file name): `header.dim[1..=3]` are set from `dims`.
+///
+/// Errors: as [`write_nifti`].
+pub(crate) fn write_raw(
+    path: &Path,
+    mut header: NiftiHeader,
+    dims: [usize; 3],
+    values: &[f64],
+    datatype: NiftiType,
+) -> Result<()> {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
@@ -253,11 +362,12 @@ pub fn write_nifti(path: &Path, volume: &Volume, datatype: NiftiType) -> Result<
         .into_iter()
         .find(|s| name.ends_with(s) && name.len() > s.len())
         .ok_or_else(|| Error::format(path, "a NIfTI file name must end in .nii or .nii.gz"))?;
-    let dim = raw_dims(volume.dims()).map_err(|m| Error::format(path, m))?;
-    let bytes = encode(volume.data(), datatype).map_err(|m| Error::format(path, m))?;
-    let header = header_for(volume, datatype);
+    let spatial = raw_dims(dims).map_err(|m| Error::format(path, m))?;
+    header.dim[1..4].copy_from_slice(&spatial[1..4]);
+    header.dim[0] = header.dim[0].max(3);
+    let bytes = encode(values, datatype).map_err(|m| Error::format(path, m))?;
     let raw = nifti::InMemNiftiVolume::from_raw_fields(
-        dim,
+        header.dim,
         crate_type(datatype),
         0.0,
         0.0,
@@ -274,6 +384,9 @@ pub fn write_nifti(path: &Path, volume: &Volume, datatype: NiftiType) -> Result<
                 .and_then(|a| options.write_nifti(&a)),
             NiftiType::I16 => raw
                 .into_ndarray::<i16>()
+                .and_then(|a| options.write_nifti(&a)),
+            NiftiType::I32 => raw
+                .into_ndarray::<i32>()
                 .and_then(|a| options.write_nifti(&a)),
             NiftiType::F32 => raw
                 .into_ndarray::<f32>()
@@ -331,10 +444,11 @@ fn quaternion_rotation(b: f32, c: f32, d: f32) -> Matrix3<f64> {
 }
 
 /// `[nx, ny, nz]` from `dim`: at least 3 dimensions, none below 1, the fourth to seventh of
-/// size 1. Sizes are the header's signed 16-bit integers.
+/// size 1 — but for `Voxel::Vector` the fifth, which must hold the 3 components. Sizes are the
+/// header's signed 16-bit integers.
 ///
 /// Errors: [`Error::Format`] for a `dim[0]` above 7, else [`Error::Geometry`].
-fn spatial_dims(header: &NiftiHeader, path: &Path) -> Result<[usize; 3]> {
+fn spatial_dims(header: &NiftiHeader, path: &Path, voxel: Voxel) -> Result<[usize; 3]> {
     let ndim = usize::from(header.dim[0]);
     if ndim > 7 {
         return Err(Error::format(
@@ -343,6 +457,7 @@ fn spatial_dims(header: &NiftiHeader, path: &Path) -> Result<[usize; 3]> {
         ));
     }
     let size = |axis: usize| i64::from(header.dim[axis] as i16);
+    let components = |axis| voxel == Voxel::Vector && axis == 5;
     let problem = if ndim < 3 {
         Some(Geometry::TooFewDimensions { ndim })
     } else if let Some(axis) = (1..=ndim).find(|&a| size(a) < 1) {
@@ -350,9 +465,14 @@ fn spatial_dims(header: &NiftiHeader, path: &Path) -> Result<[usize; 3]> {
             axis,
             size: size(axis),
         })
+    } else if voxel == Voxel::Vector && (ndim < 5 || size(5) != 3) {
+        Some(Geometry::NotVectors {
+            ndim,
+            components: if ndim < 5 { 1 } else { size(5) as usize },
+        })
     } else {
         (4..=ndim)
-            .find(|&a| size(a) > 1)
+            .find(|&a| size(a) > 1 && !components(a))
             .map(|axis| Geometry::ExtraDimension {
                 axis,
                 size: size(axis) as usize,
@@ -411,6 +531,7 @@ fn crate_type(datatype: NiftiType) -> nifti::NiftiType {
     match datatype {
         NiftiType::U8 => nifti::NiftiType::Uint8,
         NiftiType::I16 => nifti::NiftiType::Int16,
+        NiftiType::I32 => nifti::NiftiType::Int32,
         NiftiType::F32 => nifti::NiftiType::Float32,
         NiftiType::F64 => nifti::NiftiType::Float64,
     }
@@ -440,6 +561,13 @@ fn encode(values: &[f64], datatype: NiftiType) -> std::result::Result<Vec<u8>, S
                 .flat_map(|&v| (v as i16).to_ne_bytes())
                 .collect()
         }
+        NiftiType::I32 => {
+            check((f64::from(i32::MIN), f64::from(i32::MAX)), true)?;
+            values
+                .iter()
+                .flat_map(|&v| (v as i32).to_ne_bytes())
+                .collect()
+        }
         NiftiType::F32 => {
             check((-f64::from(f32::MAX), f64::from(f32::MAX)), false)?;
             values
@@ -453,7 +581,7 @@ fn encode(values: &[f64], datatype: NiftiType) -> std::result::Result<Vec<u8>, S
 
 /// The header fields this writer sets (the crate fills `dim`, `datatype`, `bitpix`,
 /// `vox_offset`, `scl_*` and the magic from the data).
-fn header_for(volume: &Volume, datatype: NiftiType) -> NiftiHeader {
+pub(crate) fn header_for(volume: &Volume, datatype: NiftiType) -> NiftiHeader {
     let m = volume.voxel_to_world();
     let a: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
     let spacing = volume.spacing();

@@ -942,8 +942,8 @@ fn stage_line(name: &str, outcome: &StageOutcome, seconds: f64) -> String {
 }
 
 /// `momenta.npy`, the model at every time point under `flow/` (the medial sheet with the
-/// fidelity of `points`, the figures at every time point of a medial template), and the
-/// fitted model, into `set`.
+/// fidelity of `points`, the figures at every time point of a medial template), the per-atom
+/// table of a medial template ([`crate::atoms`]) and the fitted model, into `set`.
 fn write_results(
     config: &Config,
     set: &mut ResultSet,
@@ -983,6 +983,9 @@ fn write_results(
         }
     }
     let q = trajectory.final_positions();
+    if let (Some(t), Some(end)) = (model.medial(), points.last()) {
+        crate::atoms::write(set, t, trajectory.positions(0), q, &end.fidelity)?;
+    }
     let fitted = set.file("fitted_template.vtk")?;
     match model.medial() {
         Some(t) => medial_io::cmrep::write_template(&fitted, &t.with_landmarks(q)?, vtk_options)?,

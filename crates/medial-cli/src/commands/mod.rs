@@ -1,9 +1,10 @@
 //! The commands of `medial`, one module each: [`fit`] and [`eval`] run a TOML schedule;
 //! [`inflate`], [`project`] and [`synth`] build templates and synthetic cases; [`rasterize`]
 //! turns a closed mesh into a mask; [`report`] writes the views of a fit folder again;
-//! [`check`] measures whether the medial points stay the centres of inscribed balls;
-//! [`batch`] fits a cohort of subjects and gathers it.
+//! [`check`] measures whether the medial points stay the centres of inscribed balls; [`apply`]
+//! carries other data by the map of a fit; [`batch`] fits a cohort of subjects and gathers it.
 
+mod apply;
 mod batch;
 mod check;
 mod eval;
@@ -27,8 +28,8 @@ pub enum Command {
     /// Run the stages of a TOML config, or without one an automatic schedule for --template
     /// and one of --image, --target, --surface; write config.toml (the resolved config),
     /// summary.json, log.csv, momenta.npy, lambda.npy, the flow of the model
-    /// (flow/boundary_tNNN.vtk, flow/medial_tNNN.vtk), time_points.csv and fitted_template.vtk
-    /// as one set (summary.json, moved in last, lists the others), then the views of the set:
+    /// (flow/boundary_tNNN.vtk, flow/medial_tNNN.vtk), time_points.csv, the per-atom table
+    /// (atoms.csv, atoms.npy) and fitted_template.vtk as one set (summary.json, moved in last, lists the others), then the views of the set:
     /// the ParaView series flow/boundary.vtk.series and flow/medial.vtk.series, flow.glb (the
     /// flow animated over t, coloured by thickness) and report.html. SIGINT or SIGTERM stops
     /// the fit after the current iteration with a checkpoint and the results so far (exit code
@@ -108,6 +109,11 @@ pub enum Command {
     /// the centres of balls inscribed in the boundary (residual |d − r| / r, balls poking out);
     /// prints JSON, exits with code 5 past --max-residual.
     Check(check::CheckArgs),
+    /// Carry points, meshes (.vtk, .obj, .gltf, .glb; VTK arrays kept) or NIfTI images (labels
+    /// nearest, intensities linear) from the template's space to the subject's by the map of a
+    /// fit (its flow after its initial alignment), or back with --inverse; optionally write the
+    /// displacement field as a NIfTI warp for ITK, ANTs and greedy. Prints a JSON summary.
+    Apply(apply::ApplyArgs),
 }
 
 /// Parses `--mu`: a positive, finite penalty weight.
@@ -192,6 +198,7 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
         Command::Report(args) => report::run(&args)?,
         Command::Check(args) => check::run(&args)?,
         Command::Batch(args) => batch::run(&args, threads, quiet)?,
+        Command::Apply(args) => apply::run(&args)?,
     }
     Ok(())
 }

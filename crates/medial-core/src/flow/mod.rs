@@ -17,7 +17,10 @@
 //! The backward pass evaluates the kernel again rather than reading back values stored by the
 //! forward pass: `N·k²/2` stored numbers do not stay in the CPU caches, and moving them through
 //! memory was measured slower than the vectorised exponential, even for k = 100.
+//!
+//! [`ambient`] carries any point of space by the same rule: the fitted flow `φ₁` and its inverse.
 
+pub mod ambient;
 pub mod kernel;
 
 use crate::flow::kernel::{F64x4, GaussianKernel, PairSweep, PairTerms, LANES};
@@ -127,7 +130,7 @@ impl Flow {
     }
 
     /// The momenta `u^n` within the flat momentum vector.
-    fn step_controls<'u>(&self, u: &'u [f64], n: usize) -> &'u [f64] {
+    pub(crate) fn step_controls<'u>(&self, u: &'u [f64], n: usize) -> &'u [f64] {
         let k3 = self.landmarks * 3;
         &u[n * k3..(n + 1) * k3]
     }

@@ -158,6 +158,19 @@ impl Volume {
         self.sample_with_gradient(p).0
     }
 
+    /// The value of the voxel nearest to world point `p` (mm) in voxel coordinates (the voxel
+    /// whose cell of ±½ voxel holds `p`; halves rounded away from 0), 0 outside the grid: the
+    /// sampling of label maps. A non-finite `p` gives NaN.
+    pub fn sample_nearest(&self, p: &Vec3) -> f64 {
+        if !p.iter().all(|c| c.is_finite()) {
+            return f64::NAN;
+        }
+        let v = (self.world_to_voxel * p.push(1.0)).xyz();
+        // Beyond the i64 range `as` saturates, far outside the grid either way.
+        let [i, j, k] = [v.x, v.y, v.z].map(|c| c.round() as i64);
+        self.at(i, j, k)
+    }
+
     /// The trilinear interpolant at world point `p` and its exact gradient with respect to `p`
     /// (per mm): `∇_p f = Aᵀ ∇_v f`, `A` the 3×3 part of the world-to-voxel map. On a cell face,
     /// where the interpolant has a kink, the gradient is the one of the cell with the larger
@@ -423,6 +436,19 @@ mod tests {
             })
             .collect();
         Volume::new(dims, data, oblique()).unwrap()
+    }
+
+    #[test]
+    fn nearest_sampling_takes_the_voxel_whose_cell_holds_the_point() {
+        let v = random_volume([4, 3, 5], 9);
+        let m = *v.voxel_to_world();
+        let at = |i: f64, j: f64, k: f64| (m * Vector4::new(i, j, k, 1.0)).xyz();
+        assert_eq!(v.sample_nearest(&at(2.0, 1.0, 3.0)), v.data()[2 + 4 * (1 + 3 * 3)]);
+        assert_eq!(v.sample_nearest(&at(2.4, 0.6, 2.6)), v.data()[2 + 4 * (1 + 3 * 3)]);
+        assert_eq!(v.sample_nearest(&at(-0.4, 2.4, 4.4)), v.data()[4 * (2 + 3 * 4)]);
+        assert_eq!(v.sample_nearest(&at(-0.6, 0.0, 0.0)), 0.0);
+        assert_eq!(v.sample_nearest(&at(0.0, 0.0, 4.6)), 0.0);
+        assert!(v.sample_nearest(&Vec3::new(f64::NAN, 0.0, 0.0)).is_nan());
     }
 
     #[test]

@@ -201,7 +201,8 @@ mod avx2 {
     /// Four lanes in an AVX register, with fused multiply-adds.
     ///
     /// Invariant: values of this type exist only on CPUs with AVX2 and FMA. The crate
-    /// creates them only in code reached through `sweep_tile_avx2_fma` (and in tests),
+    /// creates them only in code reached through `sweep_tile_avx2_fma` and
+    /// `map_chunk_avx2_fma` (and in tests),
     /// after the run-time feature check; every `unsafe` block below relies on this.
     #[derive(Clone, Copy, Debug)]
     pub(crate) struct Avx2Fma(__m256d);

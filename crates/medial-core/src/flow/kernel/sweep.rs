@@ -21,7 +21,7 @@ use std::ops::Range;
 /// Where the padding points of a [`PairSweep`] sit: far enough for the kernel to be exactly 0
 /// for any width up to 1e40, near enough for `|d|²` and its products with the terms to be
 /// finite.
-const PADDING_DISTANCE: f64 = 1e100;
+pub(super) const PADDING_DISTANCE: f64 = 1e100;
 
 /// Smallest and largest number of rows (and columns) of a block of the pair sweep. Small
 /// blocks give a problem of a few hundred landmarks tens of tiles to share between threads;
@@ -169,7 +169,7 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
 /// Where number 0 of point `i` sits in an array of points carrying `fields` numbers each,
 /// stored in chunks of [`LANES`] points field after field; number `f` is `LANES·f` further.
 #[inline(always)]
-fn chunked(i: usize, fields: usize) -> usize {
+pub(super) fn chunked(i: usize, fields: usize) -> usize {
     i / LANES * LANES * fields + i % LANES
 }
 

@@ -1,0 +1,165 @@
+//! The map of a finished fit, read from its folder: the flow of space of its momenta
+//! ([`AmbientFlow`]) after its initial alignment, if it had one.
+
+use crate::config::Config;
+use crate::error::CliError;
+use crate::stage::flow_of;
+use medial_core::flow::ambient::AmbientFlow;
+use medial_core::Vec3;
+use nalgebra::Matrix4;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// The largest distance (mm) between the end of the re-computed flow of the template and the
+/// fit's `fitted_template.vtk` for which the template is taken as the one the fit ran from.
+const SAME_FIT_MM: f64 = 1e-6;
+
+/// What `apply` reads of `summary.json`.
+#[derive(Deserialize)]
+struct Listed {
+    status: String,
+    #[serde(default)]
+    files: Vec<String>,
+}
+
+/// The map of a fit: template space → subject space, `F = φ₁ ∘ A`, with `A` the initial
+/// alignment of an automatic fit (`alignment.txt`, the template the fit started from being
+/// `aligned_template.vtk`) or the identity.
+pub struct FittedMap {
+    /// `A` and `A⁻¹`.
+    alignment: Option<(Matrix4<f64>, Matrix4<f64>)>,
+    flow: AmbientFlow,
+}
+
+impl FittedMap {
+    /// Reads the fit in `dir`: `summary.json` (a complete set of results), `config.toml` (the
+    /// flow and the template), `momenta.npy`, and `alignment.txt` when the fit started from its
+    /// `aligned_template.vtk`. The flow of the template is checked against the fit's
+    /// `fitted_template.vtk`, so that a template changed since the fit is refused.
+    pub fn open(dir: &Path) -> Result<Self, CliError> {
+        let listed = complete_set(dir)?;
+        if !matches!(listed.status.as_str(), "converged" | "budget") {
+            tracing::warn!(
+                "the fit in {} ended with status \"{}\" (see its summary.json): its map is carried \
+                 as it is",
+                dir.display(),
+                listed.status
+            );
+        }
+        let config = Config::load(&dir.join("config.toml"))?;
+        let model = medial_io::model::read_model(&config.model.template)?;
+        let k = model.landmarks().len();
+        let flow = flow_of(&config, k)?;
+        let momenta = read_momenta(&dir.join("momenta.npy"), flow.time_steps(), k)?;
+        let trajectory = flow.shoot(model.landmarks(), &momenta)?;
+        check_same_fit(dir, &config.model.template, trajectory.final_positions())?;
+        Ok(Self {
+            alignment: alignment(dir, &config.model.template)?,
+            flow: AmbientFlow::new(&flow, &trajectory, &momenta)?,
+        })
+    }
+
+    /// `F(x)` (without `inverse`) or `F⁻¹(y)` of every point.
+    pub fn carry(&self, points: &[Vec3], inverse: bool) -> Result<Vec<Vec3>, CliError> {
+        let by = |m: &Matrix4<f64>, p: &[Vec3]| -> Vec<Vec3> {
+            p.iter().map(|x| m.transform_point(&(*x).into()).coords).collect()
+        };
+        Ok(match (&self.alignment, inverse) {
+            (None, false) => self.flow.forward(points)?,
+            (None, true) => self.flow.inverse(points)?,
+            (Some((a, _)), false) => self.flow.forward(&by(a, points))?,
+            (Some((_, a_inv)), true) => by(a_inv, &self.flow.inverse(points)?),
+        })
+    }
+}
+
+/// The `summary.json` of a complete set of results in `dir` that lists `config.toml` and
+/// `momenta.npy`.
+fn complete_set(dir: &Path) -> Result<Listed, CliError> {
+    let not_complete = |why: String| {
+        CliError::Input(format!(
+            "{} is not a complete fit folder: {why}",
+            dir.display()
+        ))
+    };
+    let path = dir.join("summary.json");
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        not_complete(format!(
+            "{} cannot be read ({e}); a fit writes it last, once its results are in place",
+            path.display()
+        ))
+    })?;
+    let listed: Listed = serde_json::from_str(&text)
+        .map_err(|e| not_complete(format!("{} is malformed: {e}", path.display())))?;
+    for file in ["config.toml", "momenta.npy", "fitted_template.vtk"] {
+        if !listed.files.iter().any(|f| f == file) || !dir.join(file).is_file() {
+            return Err(not_complete(format!("{file} is not among its results")));
+        }
+    }
+    Ok(listed)
+}
+
+/// The momenta of `momenta.npy`, checked to be `[N, k, 3]` for the fit's flow.
+fn read_momenta(path: &Path, steps: usize, k: usize) -> Result<Vec<f64>, CliError> {
+    let array = medial_io::npy::read_npy(path)?;
+    if array.shape != [steps, k, 3] {
+        return Err(CliError::Input(format!(
+            "{}: shape {:?}, but the fit's config and template need [{steps}, {k}, 3] (time \
+             steps, landmarks, 3)",
+            path.display(),
+            array.shape
+        )));
+    }
+    Ok(array.data)
+}
+
+/// Refuses a template (or momenta) whose flow does not end at the fit's `fitted_template.vtk`.
+fn check_same_fit(dir: &Path, template: &Path, end: &[Vec3]) -> Result<(), CliError> {
+    let fitted = dir.join("fitted_template.vtk");
+    let points = medial_io::mesh::read_points(&fitted)?;
+    let off = (points.len() <= end.len())
+        .then(|| {
+            points
+                .iter()
+                .zip(end)
+                .map(|(a, b)| (a - b).norm())
+                .fold(0.0, f64::max)
+        })
+        .filter(|&d| d <= SAME_FIT_MM);
+    match off {
+        Some(_) => Ok(()),
+        None => Err(CliError::Input(format!(
+            "the flow of {} by {} does not end at {}: the template or the momenta have changed \
+             since the fit",
+            template.display(),
+            dir.join("momenta.npy").display(),
+            fitted.display()
+        ))),
+    }
+}
+
+/// `A` and `A⁻¹` of `dir/alignment.txt` when the fit's template is `dir/aligned_template.vtk`.
+fn alignment(
+    dir: &Path,
+    template: &Path,
+) -> Result<Option<(Matrix4<f64>, Matrix4<f64>)>, CliError> {
+    let aligned = std::path::absolute(dir.join("aligned_template.vtk"))
+        .map_err(|e| CliError::io(dir, e))?;
+    let path: PathBuf = dir.join("alignment.txt");
+    if !(same_file(&aligned, template) && path.is_file()) {
+        return Ok(None);
+    }
+    let a = medial_io::affine::read_affine(&path)?.to_homogeneous();
+    let inverse = a.try_inverse().ok_or_else(|| {
+        CliError::Input(format!("{}: the alignment is singular", path.display()))
+    })?;
+    Ok(Some((a, inverse)))
+}
+
+/// Whether two paths name the same existing file.
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    }
+}
