@@ -21,6 +21,12 @@ fn t001() -> MedialTemplate {
     medial::io::cmrep::read_template(&path).expect("t001 template")
 }
 
+/// Runs `work` on a thread of the rayon pool, inside [`measured`]: callgrind follows the call
+/// stack of each thread, and the parallel sweeps run on the pool's threads.
+fn run_measured<R: Send>(work: impl FnOnce() -> R + Send) -> R {
+    rayon::scope(|_| measured(work))
+}
+
 /// The work callgrind counts.
 #[inline(never)]
 fn measured<R>(work: impl FnOnce() -> R) -> R {
@@ -46,7 +52,7 @@ fn evaluation() {
         .flat_map(|n| q.iter().flat_map(move |p| [(0.1 * p.y).sin(), (0.1 * p.z + n as f64 * 0.01).cos(), 0.3]))
         .collect();
     let mut grad = vec![0.0; u.len()];
-    measured(|| objective.evaluate(&u, Some(&mut grad)).expect("evaluation").total);
+    run_measured(|| objective.evaluate(&u, Some(&mut grad)).expect("evaluation").total);
 }
 
 /// One value + gradient of the Dice attachment of t001 against its own rasterization.
@@ -69,7 +75,7 @@ fn dice() {
     )
     .expect("attachment");
     let mut grad = vec![Vec3::zeros(); q.len()];
-    measured(|| dice.dice(q, Some(&mut grad)).expect("dice").dice);
+    run_measured(|| dice.dice(q, Some(&mut grad)).expect("dice").dice);
 }
 
 fn main() {
