@@ -60,7 +60,10 @@ fn write_cases(cases: &[(&str, Vec<Vec3>, f64)]) {
         return;
     };
     for (name, q, sigma) in cases {
-        let lines: String = q.iter().map(|p| format!("{},{},{}\n", p.x, p.y, p.z)).collect();
+        let lines: String = q
+            .iter()
+            .map(|p| format!("{},{},{}\n", p.x, p.y, p.z))
+            .collect();
         let path = Path::new(&dir).join(format!("{name}.csv"));
         std::fs::write(&path, format!("# sigma = {sigma}\n{lines}")).expect("a case file");
     }
@@ -140,7 +143,11 @@ unsafe fn fma_chains_avx2(seed: f64) -> f64 {
         }
     }
     let mut out = [0.0; 4];
-    _mm256_storeu_pd(out.as_mut_ptr(), acc.iter().fold(_mm256_set1_pd(0.0), |s, &x| _mm256_add_pd(s, x)));
+    _mm256_storeu_pd(
+        out.as_mut_ptr(),
+        acc.iter()
+            .fold(_mm256_set1_pd(0.0), |s, &x| _mm256_add_pd(s, x)),
+    );
     out.iter().sum()
 }
 
@@ -159,7 +166,10 @@ unsafe fn fma_chains_avx512(seed: f64) -> f64 {
             *x = _mm512_fmadd_pd(*x, a, b);
         }
     }
-    _mm512_reduce_add_pd(acc.iter().fold(_mm512_set1_pd(0.0), |s, &x| _mm512_add_pd(s, x)))
+    _mm512_reduce_add_pd(
+        acc.iter()
+            .fold(_mm512_set1_pd(0.0), |s, &x| _mm512_add_pd(s, x)),
+    )
 }
 
 /// The f64 multiply-add peak: [`fma_chains_avx2`] and [`fma_chains_avx512`] on every thread of
@@ -171,14 +181,26 @@ fn peak(c: &mut Criterion) {
     let mut group = c.benchmark_group("peak");
     group.sample_size(10);
     let kinds: [(&str, usize, bool, unsafe fn(f64) -> f64); 2] = [
-        ("fma_avx2", 4, is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"), fma_chains_avx2),
-        ("fma_avx512", 8, is_x86_feature_detected!("avx512f"), fma_chains_avx512),
+        (
+            "fma_avx2",
+            4,
+            is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"),
+            fma_chains_avx2,
+        ),
+        (
+            "fma_avx512",
+            8,
+            is_x86_feature_detected!("avx512f"),
+            fma_chains_avx512,
+        ),
     ];
     for (name, lanes, supported, chains) in kinds {
         if !supported {
             continue;
         }
-        group.throughput(Throughput::Elements((threads * CHAINS * CHAIN_LENGTH * lanes * 2) as u64));
+        group.throughput(Throughput::Elements(
+            (threads * CHAINS * CHAIN_LENGTH * lanes * 2) as u64,
+        ));
         group.bench_function(format!("{name}_{threads}_threads"), |b| {
             b.iter(|| {
                 (0..threads)

@@ -17,7 +17,8 @@ use std::path::Path;
 const STEPS: usize = 40;
 
 fn t001() -> MedialTemplate {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/cmrep/t001_template_bcmrep.vtk");
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/cmrep/t001_template_bcmrep.vtk");
     medial::io::cmrep::read_template(&path).expect("t001 template")
 }
 
@@ -46,13 +47,22 @@ fn evaluation() {
         q.len(),
     )
     .expect("flow");
-    let ssd = Ssd::new(q.iter().map(|p| p + Vec3::new(1.0, -0.5, 0.25)).collect()).expect("targets");
+    let ssd =
+        Ssd::new(q.iter().map(|p| p + Vec3::new(1.0, -0.5, 0.25)).collect()).expect("targets");
     let objective = Objective::new(&flow, q, &ssd, 1.0);
     let u: Vec<f64> = (0..STEPS)
-        .flat_map(|n| q.iter().flat_map(move |p| [(0.1 * p.y).sin(), (0.1 * p.z + n as f64 * 0.01).cos(), 0.3]))
+        .flat_map(|n| {
+            q.iter()
+                .flat_map(move |p| [(0.1 * p.y).sin(), (0.1 * p.z + n as f64 * 0.01).cos(), 0.3])
+        })
         .collect();
     let mut grad = vec![0.0; u.len()];
-    run_measured(|| objective.evaluate(&u, Some(&mut grad)).expect("evaluation").total);
+    run_measured(|| {
+        objective
+            .evaluate(&u, Some(&mut grad))
+            .expect("evaluation")
+            .total
+    });
 }
 
 /// One value + gradient of the Dice attachment of t001 against its own rasterization.
@@ -60,9 +70,13 @@ fn dice() {
     let template = t001();
     let q = template.landmarks();
     let nb = template.boundary_count();
-    let boundary = TriMesh::new(q[..nb].to_vec(), template.boundary_triangles().to_vec()).expect("boundary");
+    let boundary =
+        TriMesh::new(q[..nb].to_vec(), template.boundary_triangles().to_vec()).expect("boundary");
     let (dims, grid) = grid_around(&boundary, 0.5, 3.0).expect("grid");
-    let image = rasterize(&boundary, dims, grid).expect("mask").smoothed(0.2).expect("image");
+    let image = rasterize(&boundary, dims, grid)
+        .expect("mask")
+        .smoothed(0.2)
+        .expect("image");
     let medial_of: Vec<usize> = (template.medial_index().iter())
         .map(|&m| template.atom_landmark(m))
         .collect();

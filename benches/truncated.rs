@@ -38,8 +38,8 @@ impl Case {
         let flow = (Flow::new(params, q.len()).expect("flow"))
             .with_kernel_tolerance(TOLERANCE)
             .expect("tolerance");
-        let ssd = Ssd::new(q.iter().map(|p| p + Vec3::new(1.0, -0.5, 0.25)).collect())
-            .expect("targets");
+        let ssd =
+            Ssd::new(q.iter().map(|p| p + Vec3::new(1.0, -0.5, 0.25)).collect()).expect("targets");
         let u = heart::smooth_momenta(&q, STEPS);
         Self { q, ssd, u, flow }
     }

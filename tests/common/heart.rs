@@ -20,14 +20,19 @@ pub fn heart_points(levels: usize) -> Vec<Vec3> {
         .collect();
     let triangles: Vec<[usize; 3]> = (read("surface_face.csv").lines())
         .map(|l| {
-            let c: Vec<usize> = l.split(',').map(|c| c.trim().parse().expect("a corner")).collect();
+            let c: Vec<usize> = l
+                .split(',')
+                .map(|c| c.trim().parse().expect("a corner"))
+                .collect();
             [c[0] - 1, c[1] - 1, c[2] - 1]
         })
         .collect();
     (0..2)
         .flat_map(|surface| {
             let points: Vec<Vec3> = (0..SURFACE_POINTS)
-                .map(|i| Vec3::from_column_slice(&numbers[3 * (surface * SURFACE_POINTS + i)..][..3]))
+                .map(|i| {
+                    Vec3::from_column_slice(&numbers[3 * (surface * SURFACE_POINTS + i)..][..3])
+                })
                 .collect();
             let mut mesh = TriMesh::new(points, triangles.clone()).expect("a surface");
             for _ in 0..levels {
@@ -42,9 +47,8 @@ pub fn heart_points(levels: usize) -> Vec<Vec3> {
 pub fn smooth_momenta(q: &[Vec3], steps: usize) -> Vec<f64> {
     (0..steps)
         .flat_map(|n| {
-            q.iter().flat_map(move |p| {
-                [(0.1 * p.y).sin(), (0.1 * p.z + n as f64 * 0.01).cos(), 0.3]
-            })
+            q.iter()
+                .flat_map(move |p| [(0.1 * p.y).sin(), (0.1 * p.z + n as f64 * 0.01).cos(), 0.3])
         })
         .collect()
 }

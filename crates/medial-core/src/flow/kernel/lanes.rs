@@ -295,7 +295,12 @@ mod x86 {
         fn load(v: &[f64]) -> Self {
             let v = &v[..LANES];
             // SAFETY: `v` holds 8 numbers; AVX2 is available (type invariant).
-            unsafe { Self([_mm256_loadu_pd(v.as_ptr()), _mm256_loadu_pd(v[4..].as_ptr())]) }
+            unsafe {
+                Self([
+                    _mm256_loadu_pd(v.as_ptr()),
+                    _mm256_loadu_pd(v[4..].as_ptr()),
+                ])
+            }
         }
 
         #[inline(always)]

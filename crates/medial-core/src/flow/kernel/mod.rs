@@ -246,7 +246,10 @@ mod tests {
             let r = k.cutoff_radius();
             assert!(r > k.sigma());
             let at_r = k.of_squared_distance(r * r);
-            assert!((at_r - eps).abs() <= 1e-12 * eps, "η(r) = {at_r}, ε = {eps}");
+            assert!(
+                (at_r - eps).abs() <= 1e-12 * eps,
+                "η(r) = {at_r}, ε = {eps}"
+            );
         }
         for eps in [-1e-3, 0.6, f64::NAN, f64::INFINITY] {
             assert!(kernel.truncated(eps).is_err(), "ε = {eps}");

@@ -341,7 +341,9 @@ impl Aabb {
     fn gap_squared(&self, other: &Self) -> f64 {
         (0..3)
             .map(|a| {
-                let gap = (self.lo[a] - other.hi[a]).max(other.lo[a] - self.hi[a]).max(0.0);
+                let gap = (self.lo[a] - other.hi[a])
+                    .max(other.lo[a] - self.hi[a])
+                    .max(0.0);
                 gap * gap
             })
             .sum()
@@ -543,7 +545,12 @@ mod tests {
 
     /// The sums of a sweep over `points` with the kernel tolerance `eps` and the inner loops
     /// `isa`, and the number of tiles swept.
-    fn swept_sums(points: &[(Vec3, f64)], sigma: f64, eps: f64, isa: Isa) -> (Vec<[f64; 2]>, usize) {
+    fn swept_sums(
+        points: &[(Vec3, f64)],
+        sigma: f64,
+        eps: f64,
+        isa: Isa,
+    ) -> (Vec<[f64; 2]>, usize) {
         let kernel = GaussianKernel::new(sigma).unwrap().truncated(eps).unwrap();
         let mut sweep = PairSweep::<4, 2>::new(&kernel, points.len());
         for (i, (q, w)) in points.iter().enumerate() {
@@ -559,10 +566,10 @@ mod tests {
         let e = Vec3::new(1.0, 2.0, -0.5);
         (points.iter().enumerate())
             .map(|(i, (qi, _))| {
-                (points.iter().enumerate().filter(|&(j, _)| j != i)).fold(
-                    [0.0; 2],
-                    |[a, b], (_, (qj, wj))| [a + wj.abs(), b + e.dot(&(qi - qj)).abs()],
-                )
+                (points.iter().enumerate().filter(|&(j, _)| j != i))
+                    .fold([0.0; 2], |[a, b], (_, (qj, wj))| {
+                        [a + wj.abs(), b + e.dot(&(qi - qj)).abs()]
+                    })
             })
             .collect()
     }
