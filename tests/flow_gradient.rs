@@ -253,3 +253,86 @@ fn bad_sizes_and_parameters_are_errors() {
     )
     .is_err());
 }
+
+/// A case spread over a box 40 mm wide (σ = 1.7 mm), where a truncated kernel skips pairs.
+fn spread_case(seed: u64, k: usize, steps: usize) -> Case {
+    let mut case = random_case(seed, k, steps);
+    for p in case.template.iter_mut().chain(&mut case.targets) {
+        *p *= 5.0;
+    }
+    case
+}
+
+/// The truncated flow skips the same pairs in both passes, so its gradient is the exact
+/// gradient of the truncated objective (ε = 1e-10: a pair crossing the cut under the finite
+/// difference's step would move the value by at most ~1e-10 × the sums of the terms).
+#[test]
+fn truncated_gradient_matches_central_differences() {
+    for seed in 0..3 {
+        let case = spread_case(seed, 150, 4);
+        let flow = flow_of(&case).with_kernel_tolerance(1e-10).unwrap();
+        let mut grad = vec![0.0; case.controls.len()];
+        let value = evaluate(&case, &flow, &case.controls, Some(&mut grad));
+        let mut exact_grad = vec![0.0; case.controls.len()];
+        let exact_value = evaluate(
+            &case,
+            &flow_of(&case),
+            &case.controls,
+            Some(&mut exact_grad),
+        );
+        assert!((value - exact_value).abs() <= 1e-8 * exact_value.abs());
+        let mut rng = ChaCha8Rng::seed_from_u64(200 + seed);
+        for _ in 0..4 {
+            let dir: Vec<f64> = (0..grad.len()).map(|_| rng.gen_range(-1.0..1.0)).collect();
+            let h = 1e-5;
+            let shifted = |s: f64| -> Vec<f64> {
+                (case.controls.iter().zip(&dir))
+                    .map(|(u, d)| u + s * d)
+                    .collect()
+            };
+            let fd = (evaluate(&case, &flow, &shifted(h), None)
+                - evaluate(&case, &flow, &shifted(-h), None))
+                / (2.0 * h);
+            let derivative: f64 = grad.iter().zip(&dir).map(|(g, d)| g * d).sum();
+            let rel = (fd - derivative).abs() / derivative.abs().max(1e-12);
+            assert!(
+                rel <= 1e-6,
+                "seed {seed}: {derivative} vs finite difference {fd} (rel {rel:e})"
+            );
+        }
+    }
+}
+
+#[test]
+fn truncated_flow_is_the_same_bits_with_one_two_or_three_threads() {
+    let case = spread_case(8, 700, 3);
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let flow = flow_of(&case).with_kernel_tolerance(1e-8).unwrap();
+            let mut grad = vec![0.0; case.controls.len()];
+            let v = evaluate(&case, &flow, &case.controls, Some(&mut grad));
+            (
+                v.to_bits(),
+                grad.iter().map(|g| g.to_bits()).collect::<Vec<_>>(),
+            )
+        })
+    };
+    let one = run(1);
+    assert_eq!(one, run(2));
+    assert_eq!(one, run(3));
+}
+
+#[test]
+fn bad_kernel_tolerances_are_errors() {
+    let case = random_case(1, 10, 3);
+    for eps in [-1e-9, 0.7, f64::NAN] {
+        assert!(
+            flow_of(&case).with_kernel_tolerance(eps).is_err(),
+            "ε = {eps}"
+        );
+    }
+}

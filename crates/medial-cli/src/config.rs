@@ -2,6 +2,7 @@
 //! relative paths are relative to the config file.
 
 use crate::error::CliError;
+use medial_core::flow::kernel::MAX_TOLERANCE;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -40,6 +41,9 @@ pub struct FlowConfig {
     pub time_steps: usize,
     /// Weight of the kinetic energy.
     pub kinetic_weight: f64,
+    /// Kernel tolerance ε: the sums skip landmark pairs whose kernel value is below it
+    /// (0: exact; at most `medial_core::flow::kernel::MAX_TOLERANCE`).
+    pub kernel_tolerance: f64,
 }
 
 impl Default for FlowConfig {
@@ -48,6 +52,7 @@ impl Default for FlowConfig {
             sigma: 2.0,
             time_steps: 40,
             kinetic_weight: 0.05,
+            kernel_tolerance: 0.0,
         }
     }
 }
@@ -372,6 +377,12 @@ impl Config {
         let f = &self.flow;
         positive("flow.sigma", f.sigma)?;
         non_negative("flow.kinetic_weight", f.kinetic_weight)?;
+        if !(0.0..=MAX_TOLERANCE).contains(&f.kernel_tolerance) {
+            return Err(format!(
+                "flow.kernel_tolerance must be in [0, {MAX_TOLERANCE}], got {}",
+                f.kernel_tolerance
+            ));
+        }
         if f.time_steps == 0 {
             return Err("flow.time_steps must be at least 1".into());
         }

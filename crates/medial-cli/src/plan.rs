@@ -194,6 +194,7 @@ impl FitPlan {
                 sigma: (self.sigma * 100.0).round() / 100.0,
                 time_steps: self.time_steps,
                 kinetic_weight: self.kinetic_weight,
+                ..FlowConfig::default()
             },
             output: OutputConfig::default(),
             stages,
@@ -415,6 +416,7 @@ pub fn automatic_plain(template: PathBuf, target: &Target, sigma: f64) -> Option
             sigma: (sigma * 100.0).round() / 100.0,
             time_steps: AUTOMATIC.time_steps,
             kinetic_weight: PLAIN_KINETIC_WEIGHT,
+            ..FlowConfig::default()
         },
         output: OutputConfig::default(),
         stages: vec![stage],

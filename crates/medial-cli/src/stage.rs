@@ -41,7 +41,7 @@ pub fn flow_of(config: &Config, landmarks: usize) -> Result<Flow, CliError> {
         time_steps: f.time_steps,
         kinetic_weight: f.kinetic_weight,
     };
-    Ok(Flow::new(params, landmarks)?)
+    Ok(Flow::new(params, landmarks)?.with_kernel_tolerance(f.kernel_tolerance)?)
 }
 
 /// A stage ready to run.

@@ -83,7 +83,7 @@
 //!   normals within `σ_w` cancel, so thin parts and noise are invisible to it.
 
 use super::{Attachment, AttachmentValue};
-use crate::flow::kernel::{exp_neg_scaled, F64x4, GaussianKernel, PairSweep, PairTerms, LANES};
+use crate::flow::kernel::{exp_neg_scaled, F64Lanes, GaussianKernel, PairSweep, PairTerms, LANES};
 use crate::{Error, Result, TriMesh, Vec3};
 
 /// The default width of the normal kernel of [`Kind::OrientedVarifold`] (that of geomstats):
@@ -419,7 +419,7 @@ impl Sweep {
 /// A kernel `φ(t)` on the unit normals, `t = u_a·u_b`, lane by lane.
 trait NormalKernel: Sync {
     /// `[φ(t), φ'(t), φ(t) − tφ'(t)]`.
-    fn eval<V: F64x4>(&self, t: V) -> [V; 3];
+    fn eval<V: F64Lanes>(&self, t: V) -> [V; 3];
 }
 
 /// `φ(t) = t²` (unoriented varifold).
@@ -427,7 +427,7 @@ struct Binet;
 
 impl NormalKernel for Binet {
     #[inline(always)]
-    fn eval<V: F64x4>(&self, t: V) -> [V; 3] {
+    fn eval<V: F64Lanes>(&self, t: V) -> [V; 3] {
         let t2 = t * t;
         [t2, t * V::splat(2.0), V::splat(0.0) - t2]
     }
@@ -440,7 +440,7 @@ struct SphereGaussian {
 
 impl NormalKernel for SphereGaussian {
     #[inline(always)]
-    fn eval<V: F64x4>(&self, t: V) -> [V; 3] {
+    fn eval<V: F64Lanes>(&self, t: V) -> [V; 3] {
         let phi = exp_neg_scaled(V::splat(1.0) - t, self.scale);
         let slope = phi * V::splat(self.scale);
         [phi, slope, t.neg_mul_add(slope, phi)]
@@ -452,7 +452,7 @@ struct Linear;
 
 impl NormalKernel for Linear {
     #[inline(always)]
-    fn eval<V: F64x4>(&self, t: V) -> [V; 3] {
+    fn eval<V: F64Lanes>(&self, t: V) -> [V; 3] {
         [t, V::splat(1.0), V::splat(0.0)]
     }
 }
@@ -462,7 +462,7 @@ struct VarifoldTerms<N>(N);
 
 impl<N: NormalKernel> PairTerms<7, 8> for VarifoldTerms<N> {
     #[inline(always)]
-    fn accumulate<V: F64x4>(
+    fn accumulate<V: F64Lanes>(
         &self,
         row: &[f64; 7],
         chunk: &[f64],

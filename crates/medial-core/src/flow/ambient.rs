@@ -20,7 +20,7 @@
 //! Points are mapped in parallel, each by the same operations whatever the thread count: the
 //! results are bit-identical for any number of threads (see [`crate::flow::kernel`]).
 
-use crate::flow::kernel::{map_points, F64x4, PointMap, Sources};
+use crate::flow::kernel::{map_points, F64Lanes, PointMap, Sources};
 use crate::flow::{Flow, Trajectory};
 use crate::{Error, Result, Vec3};
 
@@ -97,7 +97,7 @@ fn finite(x: &Vec3, what: &str) -> Result<()> {
 struct Forward<'a>(&'a AmbientFlow);
 
 impl PointMap for Forward<'_> {
-    fn map<V: F64x4>(&self, x: &Vec3) -> Result<Vec3> {
+    fn map<V: F64Lanes>(&self, x: &Vec3) -> Result<Vec3> {
         finite(x, "the point")?;
         let flow = self.0;
         let y = flow
@@ -113,7 +113,7 @@ impl PointMap for Forward<'_> {
 struct Inverse<'a>(&'a AmbientFlow);
 
 impl PointMap for Inverse<'_> {
-    fn map<V: F64x4>(&self, y: &Vec3) -> Result<Vec3> {
+    fn map<V: F64Lanes>(&self, y: &Vec3) -> Result<Vec3> {
         finite(y, "the point")?;
         let flow = self.0;
         let mut next = *y;
@@ -134,7 +134,7 @@ impl PointMap for Inverse<'_> {
 /// The point `x` with `x + dt v(x) = next` by fixed-point iteration (module documentation), or
 /// the last change when it does not converge.
 #[inline(always)]
-fn backward_step<V: F64x4>(
+fn backward_step<V: F64Lanes>(
     step: &Sources,
     dt: f64,
     tolerance: f64,

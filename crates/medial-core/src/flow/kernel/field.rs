@@ -10,7 +10,7 @@
 //! for any thread count. The terms are those of the landmark flow's velocity: at a landmark
 //! `x = q_i` the sum is the one [`super::PairSweep`] gives for `i` plus `u_i`, in another order.
 
-use super::lanes::{self, F64x4, Isa};
+use super::lanes::{self, F64Lanes, Isa};
 use super::sweep::{chunked, PADDING_DISTANCE};
 use super::{exp_neg_scaled, GaussianKernel, LANES};
 use crate::{Result, Vec3};
@@ -55,7 +55,7 @@ impl Sources {
 
     /// `v(x) = Σ_j η(|x − q_j|) u_j` with the lanes `V`.
     #[inline(always)]
-    pub(crate) fn velocity<V: F64x4>(&self, x: &Vec3) -> Vec3 {
+    pub(crate) fn velocity<V: F64Lanes>(&self, x: &Vec3) -> Vec3 {
         let xs = [V::splat(x.x), V::splat(x.y), V::splat(x.z)];
         let mut sums = [V::splat(0.0); 3];
         for chunk in self.points.chunks_exact(LANES * FIELDS) {
@@ -73,7 +73,7 @@ impl Sources {
 /// A map of points of space computed with kernel sums on the lanes `V` ([`Sources::velocity`]).
 pub(crate) trait PointMap: Sync {
     /// The image of `x`, or why there is none.
-    fn map<V: F64x4>(&self, x: &Vec3) -> Result<Vec3>;
+    fn map<V: F64Lanes>(&self, x: &Vec3) -> Result<Vec3>;
 }
 
 /// `map` of every point, in parallel over chunks of points, with the fastest lanes the CPU has;
@@ -99,12 +99,27 @@ fn map_points_with<M: PointMap>(map: &M, points: &[Vec3], isa: Isa) -> Result<Ve
 fn map_chunk<M: PointMap>(map: &M, chunk: &[Vec3], isa: Isa) -> Result<Vec<Vec3>> {
     match isa {
         #[cfg(target_arch = "x86_64")]
-        Isa::Avx2Fma if Isa::best() == Isa::Avx2Fma => {
+        Isa::Avx512 if isa.is_supported() => {
+            // SAFETY: the running CPU supports AVX-512F, checked just above.
+            unsafe { map_chunk_avx512(map, chunk) }
+        }
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2Fma if isa.is_supported() => {
             // SAFETY: the running CPU supports AVX2 and FMA, checked just above.
             unsafe { map_chunk_avx2_fma(map, chunk) }
         }
         _ => map_chunk_with::<M, lanes::Portable>(map, chunk),
     }
+}
+
+/// [`map_chunk_with`] on AVX-512 registers.
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn map_chunk_avx512<M: PointMap>(map: &M, chunk: &[Vec3]) -> Result<Vec<Vec3>> {
+    map_chunk_with::<M, lanes::Avx512>(map, chunk)
 }
 
 /// [`map_chunk_with`] on AVX2 registers with fused multiply-adds.
@@ -118,7 +133,7 @@ unsafe fn map_chunk_avx2_fma<M: PointMap>(map: &M, chunk: &[Vec3]) -> Result<Vec
 }
 
 #[inline(always)]
-fn map_chunk_with<M: PointMap, V: F64x4>(map: &M, chunk: &[Vec3]) -> Result<Vec<Vec3>> {
+fn map_chunk_with<M: PointMap, V: F64Lanes>(map: &M, chunk: &[Vec3]) -> Result<Vec<Vec3>> {
     chunk.iter().map(|x| map.map::<V>(x)).collect()
 }
 
@@ -131,7 +146,7 @@ mod tests {
     struct Velocity(Sources);
 
     impl PointMap for Velocity {
-        fn map<V: F64x4>(&self, x: &Vec3) -> Result<Vec3> {
+        fn map<V: F64Lanes>(&self, x: &Vec3) -> Result<Vec3> {
             Ok(self.0.velocity::<V>(x))
         }
     }

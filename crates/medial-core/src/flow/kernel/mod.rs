@@ -1,14 +1,21 @@
 //! The Gaussian kernel `η(r) = exp(−r² / (2σ²))` and its sums over pairs of landmarks.
 //!
 //! [`GaussianKernel`] and the exponential [`exp_nonpositive`] are here; `sweep` computes the
-//! sums `S_c(i) = Σ_{j ≠ i} K_ij t_c(i, j)` over all pairs of landmarks, tile by tile in
-//! parallel and bit-identical whatever the thread count; `field` the velocity
-//! `v(x) = Σ_j K(x, q_j) u_j` of the landmarks at any point of space; `lanes` holds the SIMD arithmetic of
-//! its inner loops, which handle `LANES` pairs at once, with the exponential written out as a
-//! polynomial so that it runs in SIMD registers too.
+//! sums `S_c(i) = Σ_{j ≠ i} K_ij t_c(i, j)` over all pairs of landmarks, or only over the
+//! pairs nearer than the kernel's cutoff radius when it has a tolerance
+//! ([`GaussianKernel::truncated`]), tile by tile in parallel and bit-identical whatever the
+//! thread count; `field` the velocity `v(x) = Σ_j K(x, q_j) u_j` of the landmarks at any point
+//! of space; `lanes` holds the SIMD arithmetic of its inner loops, which handle `LANES`
+//! pairs at once, with the exponential written out as a polynomial so that it runs in SIMD
+//! registers too.
 //!
-//! Cost (AMD EPYC at 2.45 GHz, AVX2, one thread, 500 – 2,000 points): about 2.2 ns per pair
-//! for the velocity terms of the flow and 3.4 ns for the adjoint terms.
+//! Arithmetic per pair (from the code; a fused multiply-add counts as 2 flops): the distance
+//! 8 flops (3 subtractions, `|d|²` 1 multiplication + 2 multiply-adds), the exponential 33
+//! (2 multiply-adds and 3 operations for the reduction, 11 multiply-adds and 2 multiplications
+//! for the polynomial, 1 multiplication by `2^k`; plus a minimum and 2 integer operations),
+//! then the terms: 12 for the flow's velocity (6 multiply-adds), 36 for its adjoint (2 dot
+//! products 11, `K s` 1, 12 multiply-adds 24). So 53 flops per pair and step forward and 77
+//! backward, in 31 and 44 SIMD floating-point instructions per [`LANES`] pairs.
 
 mod field;
 mod lanes;
@@ -16,19 +23,26 @@ mod sweep;
 
 use crate::{Error, Result};
 
-/// Pairs handled together by the inner loops: one AVX2 register of `f64`.
-pub(crate) const LANES: usize = 4;
+/// Pairs handled together by the inner loops: one AVX-512 register of `f64`, two AVX2 ones.
+pub(crate) const LANES: usize = 8;
 
 pub(crate) use field::{map_points, PointMap, Sources};
-pub(crate) use lanes::{F64x4, Real};
+pub(crate) use lanes::{F64Lanes, Real};
 pub(crate) use sweep::{PairSweep, PairTerms};
 
-/// Gaussian kernel of width `σ` (same unit as the coordinates).
+/// Largest kernel tolerance ε: below `e^{−1/2}` the cutoff radius exceeds σ, which the bound
+/// on the adjoint's sums needs (see the `sweep` module).
+pub const MAX_TOLERANCE: f64 = 0.5;
+
+/// Gaussian kernel of width `σ` (same unit as the coordinates), exact or truncated: with a
+/// tolerance ε > 0, the sums over pairs skip pairs whose kernel value is below ε.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct GaussianKernel {
     sigma: f64,
     /// `1 / (2σ²)`.
     half_inv_sigma2: f64,
+    /// ε; 0 for the exact kernel.
+    tolerance: f64,
 }
 
 impl GaussianKernel {
@@ -42,12 +56,40 @@ impl GaussianKernel {
         Ok(Self {
             sigma,
             half_inv_sigma2: 0.5 / (sigma * sigma),
+            tolerance: 0.0,
         })
+    }
+
+    /// The kernel with the tolerance `ε ∈ [0, MAX_TOLERANCE]` (0: exact): sums over pairs
+    /// skip only pairs farther apart than [`Self::cutoff_radius`], whose kernel value is below
+    /// ε, and the error of a sum `Σ_j K_ij t_ij` is then at most `ε Σ_j |t_ij|`.
+    pub fn truncated(self, tolerance: f64) -> Result<Self> {
+        if !(0.0..=MAX_TOLERANCE).contains(&tolerance) {
+            return Err(Error::InvalidParameter(format!(
+                "kernel tolerance must be a number in [0, {MAX_TOLERANCE}], got {tolerance}"
+            )));
+        }
+        Ok(Self { tolerance, ..self })
     }
 
     /// The width `σ`.
     pub fn sigma(&self) -> f64 {
         self.sigma
+    }
+
+    /// The tolerance ε (0: exact).
+    pub fn tolerance(&self) -> f64 {
+        self.tolerance
+    }
+
+    /// The distance beyond which the kernel is below the tolerance: `r = σ √(2 ln(1/ε))`,
+    /// `η(r) = ε`; ∞ for the exact kernel.
+    pub fn cutoff_radius(&self) -> f64 {
+        if self.tolerance > 0.0 {
+            self.sigma * (2.0 * (1.0 / self.tolerance).ln()).sqrt()
+        } else {
+            f64::INFINITY
+        }
     }
 
     /// `η` as a function of the squared distance: `exp(−r² / (2σ²))`.
@@ -166,7 +208,7 @@ mod tests {
     }
 
     /// The worst error in ulp of [`exp_neg_scaled`] on the lanes `V` over [`exponents`].
-    fn worst_lane_error<V: F64x4>() -> f64 {
+    fn worst_lane_error<V: F64Lanes>() -> f64 {
         exponents().fold(0.0f64, |w, x| {
             let e = exp_neg_scaled(V::splat(-x), 1.0).to_array();
             e.iter().fold(w, |w, &e| w.max(ulps(e, x.exp())))
@@ -178,10 +220,16 @@ mod tests {
         let worst = worst_lane_error::<lanes::Portable>();
         assert!(worst < 4.0, "portable: worst error {worst} ulp");
         #[cfg(target_arch = "x86_64")]
-        if Isa::best() == Isa::Avx2Fma {
+        if Isa::Avx2Fma.is_supported() {
             // The CPU has AVX2 and FMA, as `Avx2Fma` values require.
             let worst = worst_lane_error::<lanes::Avx2Fma>();
             assert!(worst < 4.0, "AVX2: worst error {worst} ulp");
+        }
+        #[cfg(target_arch = "x86_64")]
+        if Isa::Avx512.is_supported() {
+            // The CPU has AVX-512F, as `Avx512` values require.
+            let worst = worst_lane_error::<lanes::Avx512>();
+            assert!(worst < 4.0, "AVX-512: worst error {worst} ulp");
         }
     }
 
@@ -189,6 +237,25 @@ mod tests {
     fn kernel_rejects_bad_width() {
         for s in [0.0, -1.0, f64::NAN, f64::INFINITY] {
             assert!(GaussianKernel::new(s).is_err());
+        }
+    }
+
+    #[test]
+    fn cutoff_radius_is_where_the_kernel_meets_the_tolerance() {
+        let kernel = GaussianKernel::new(4.0).unwrap();
+        assert_eq!(kernel.cutoff_radius(), f64::INFINITY);
+        for eps in [1e-12, 1e-10, 1e-3, MAX_TOLERANCE] {
+            let k = kernel.truncated(eps).unwrap();
+            let r = k.cutoff_radius();
+            assert!(r > k.sigma());
+            let at_r = k.of_squared_distance(r * r);
+            assert!(
+                (at_r - eps).abs() <= 1e-12 * eps,
+                "η(r) = {at_r}, ε = {eps}"
+            );
+        }
+        for eps in [-1e-3, 0.6, f64::NAN, f64::INFINITY] {
+            assert!(kernel.truncated(eps).is_err(), "ε = {eps}");
         }
     }
 }

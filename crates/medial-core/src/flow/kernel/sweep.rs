@@ -2,18 +2,34 @@
 //!
 //! [`PairSweep`] computes sums `S_c(i) = Σ_{j ≠ i} K_ij t_c(i, j)` over all pairs, with
 //! `K_ij = η(|q_i − q_j|)`, for pair terms `t_c` supplied by the caller ([`PairTerms`]). The
-//! index range is cut into blocks; every tile (I, J), I ≤ J, of blocks evaluates the kernel once
-//! per unordered pair {i, j} and accumulates both the terms of its rows i ∈ I and those of its
-//! columns j ∈ J in a buffer of its own. Tiles run in parallel (rayon); the buffers are then
-//! reduced in a fixed order. Every number is thus computed by the same operations in the same
-//! order whatever the thread count, and results are bit-identical.
+//! points are laid out in slots cut into blocks; every tile (I, J), I ≤ J, of blocks evaluates
+//! the kernel once per unordered pair {i, j} and accumulates both the terms of its rows i ∈ I
+//! and those of its columns j ∈ J in a buffer of its own. Tiles run in parallel (rayon); the
+//! buffers are then reduced in a fixed order (per block, the tiles in their order). Every
+//! number is thus computed by the same operations in the same order whatever the thread
+//! count, and results are bit-identical.
 //!
-//! The inner loops handle [`LANES`] pairs at once. They are compiled twice, for any CPU and
-//! for AVX2 with fused multiply-adds ([`Isa`]), chosen at run time once per tile. The two give
-//! results that differ in the last bits (fused or separate roundings), so results may differ
-//! between CPUs, but never between thread counts on one machine.
+//! **Exact** (the kernel's tolerance ε = 0): the slots are the points in their order and every
+//! tile is swept. **Truncated** (ε > 0): at every run the points are sorted along a Z-order
+//! curve of a cell grid of side `r/4`, `r = σ √(2 ln(1/ε))` the kernel's cutoff radius
+//! ([`GaussianKernel::cutoff_radius`]), so that the blocks of consecutive slots are small
+//! clusters; a tile is swept only if the bounding boxes of its two blocks are at most `r`
+//! apart. Every pair skipped is thus more than `r` apart and has `K_ij < ε`, so that
+//!
+//! `|S_c(i) − S^ε_c(i)| ≤ ε Σ_{j skipped} |t_c(i, j)| ≤ ε Σ_{j ≠ i} |t_c(i, j)|`,
+//!
+//! and, for terms `t_c(i, j) = s_ij (q_i − q_j)_c` (the adjoint's), `≤ ε r Σ_j |s_ij|`, as
+//! `x e^{−x²/(2σ²)}` decreases for `x > σ` and `r > σ` (ε < e^{−1/2}). The grid and the
+//! order depend on the positions only, so truncated sums are as deterministic as exact ones,
+//! and two runs on the same positions skip the same pairs.
+//!
+//! The inner loops handle [`LANES`] pairs at once. They are compiled for any CPU, for AVX2
+//! with fused multiply-adds and for AVX-512 ([`Isa`]), chosen at run time once per tile. The
+//! SIMD versions give the same bits; the portable one differs from them in the last bits
+//! (separate roundings), so results may differ between CPUs with and without FMA, but never
+//! between thread counts on one machine.
 
-use super::lanes::{self, F64x4, Isa};
+use super::lanes::{self, F64Lanes, Isa};
 use super::{exp_neg_scaled, GaussianKernel, LANES};
 use rayon::prelude::*;
 use std::ops::Range;
@@ -23,10 +39,17 @@ use std::ops::Range;
 /// finite.
 pub(super) const PADDING_DISTANCE: f64 = 1e100;
 
-/// Smallest and largest number of rows (and columns) of a block of the pair sweep. Small
+/// Smallest and largest number of rows (and columns) of a block of an exact pair sweep. Small
 /// blocks give a problem of a few hundred landmarks tens of tiles to share between threads;
 /// large blocks make fewer partial sums to store and reduce when there are thousands.
 const BLOCK_RANGE: (usize, usize) = (64, 256);
+
+/// Rows of a block of a truncated sweep: small clusters, whose boxes skip most far pairs, yet
+/// enough pairs per tile (4,096) to make the per-tile work (partial sums) small.
+const TRUNCATED_BLOCK: usize = 64;
+
+/// Cells of the grid of a truncated sweep per cutoff radius.
+const CELLS_PER_CUTOFF: f64 = 4.0;
 
 /// The terms `t_c(i, j)`, `c < C`, of pair sums `S_c(i) = Σ_{j ≠ i} K_ij t_c(i, j)` over points
 /// that carry `F` numbers each, the first three being the coordinates of the point.
@@ -35,7 +58,7 @@ pub(crate) trait PairTerms<const F: usize, const C: usize>: Sync {
     /// in lane `l` at `chunk[LANES·f + l]`), given the numbers of point `i` (`row`), `K_ij`
     /// (`kernel`) and `d = q_i − q_j`: adds `K_ij t_c(i, j)` to `row_sums[c]` and
     /// `K_ij t_c(j, i)` to the sums of the points `j`, `col_sums[LANES·c + l]`.
-    fn accumulate<V: F64x4>(
+    fn accumulate<V: F64Lanes>(
         &self,
         row: &[f64; F],
         chunk: &[f64],
@@ -47,18 +70,23 @@ pub(crate) trait PairTerms<const F: usize, const C: usize>: Sync {
 }
 
 /// Pair sums `S_c(i) = Σ_{j ≠ i} K_ij t_c(i, j)`, `c < C`, over points carrying `F` numbers
-/// each, with one kernel evaluation per unordered pair (see the module documentation).
+/// each, with one kernel evaluation per unordered pair, exact or truncated (see the module
+/// documentation).
 ///
-/// Points, partial sums and sums are stored in chunks of [`LANES`] points, field after field
-/// (number `f` of point `i` at `⌊i/LANES⌋·LANES·F + LANES·f + i mod LANES`), so that the inner
-/// loops read and write whole registers from contiguous memory. The point count is padded to
-/// a multiple of [`LANES`] with points [`PADDING_DISTANCE`] away, whose kernel values with the
-/// others are exactly 0, and whose other numbers are 0.
+/// Points, partial sums and sums are stored by slot in chunks of [`LANES`] slots, field after
+/// field (number `f` of slot `s` at `⌊s/LANES⌋·LANES·F + LANES·f + s mod LANES`), so that the
+/// inner loops read and write whole registers from contiguous memory. The slot count is padded
+/// to a multiple of [`LANES`] with points [`PADDING_DISTANCE`] away, whose kernel values with
+/// the others are exactly 0, and whose other numbers are 0.
 #[derive(Clone, Debug)]
 pub(crate) struct PairSweep<const F: usize, const C: usize> {
-    tiling: Tiling,
     /// `1/(2σ²)`.
     scale: f64,
+    /// The kernel's cutoff radius: ∞ for an exact sweep.
+    cutoff: f64,
+    /// The numbers of every point, as set.
+    staged: Vec<[f64; F]>,
+    layout: Layout,
     points: Vec<f64>,
     /// Per tile, the partial sums of its rows, then those of its columns (`C·block` each).
     partials: Vec<f64>,
@@ -66,54 +94,71 @@ pub(crate) struct PairSweep<const F: usize, const C: usize> {
 }
 
 impl<const F: usize, const C: usize> PairSweep<F, C> {
-    /// A sweep of `kernel` over `landmarks` points, all at the origin with zero numbers.
+    /// A sweep of `kernel` (exact or truncated, by its tolerance) over `landmarks` points, all
+    /// at the origin with zero numbers.
     pub(crate) fn new(kernel: &GaussianKernel, landmarks: usize) -> Self {
-        let tiling = Tiling::new(landmarks);
-        let mut points = vec![0.0; tiling.padded * F];
-        for i in landmarks..tiling.padded {
-            points[chunked(i, F)] = PADDING_DISTANCE;
+        let layout = Layout::exact(landmarks);
+        let mut points = vec![0.0; layout.padded * F];
+        for s in landmarks..layout.padded {
+            points[chunked(s, F)] = PADDING_DISTANCE;
         }
         Self {
             scale: kernel.half_inv_sigma2,
+            cutoff: kernel.cutoff_radius(),
+            staged: vec![[0.0; F]; landmarks],
+            sums: vec![0.0; layout.padded * C],
+            partials: Vec::new(),
             points,
-            partials: vec![0.0; tiling.tiles.len() * 2 * C * tiling.block],
-            sums: vec![0.0; tiling.padded * C],
-            tiling,
+            layout,
         }
     }
 
     /// Sets the numbers of point `i`: its coordinates, then `F − 3` numbers for the terms.
     #[inline]
     pub(crate) fn set_point(&mut self, i: usize, numbers: [f64; F]) {
-        let base = chunked(i, F);
-        for (f, x) in numbers.into_iter().enumerate() {
-            self.points[base + LANES * f] = x;
-        }
+        self.staged[i] = numbers;
     }
 
     /// `[S_0(i), …, S_{C−1}(i)]` as of the last [`PairSweep::run`].
     #[inline]
     pub(crate) fn sums(&self, i: usize) -> [f64; C] {
-        let base = chunked(i, C);
+        let base = chunked(self.layout.slot[i], C);
         std::array::from_fn(|c| self.sums[base + LANES * c])
     }
 
-    /// Computes the sums for the current points: the tiles in parallel, then for each block of
-    /// rows the partial sums of its tiles in a fixed order.
+    /// Computes the sums for the current points: the layout (a truncated sweep's depends on
+    /// the positions), the tiles in parallel, then for each block of slots the partial sums
+    /// of its tiles in a fixed order.
     pub(crate) fn run<T: PairTerms<F, C>>(&mut self, terms: &T) {
         self.run_with(terms, Isa::best());
     }
 
     /// [`PairSweep::run`] with the inner loops `isa` (or portable ones if the CPU lacks it).
     fn run_with<T: PairTerms<F, C>>(&mut self, terms: &T, isa: Isa) {
+        if self.cutoff.is_finite() {
+            self.layout = Layout::truncated(&self.staged, self.cutoff);
+        }
+        self.lay_out_points();
+        let len = self.layout.tiles.len() * 2 * C * self.layout.block;
+        self.partials.resize(len, 0.0);
         self.sweep_tiles(terms, isa);
         self.reduce();
+    }
+
+    /// Copies the numbers of every point to its slot.
+    fn lay_out_points(&mut self) {
+        for (numbers, &s) in self.staged.iter().zip(&self.layout.slot) {
+            let base = chunked(s, F);
+            for (f, &x) in numbers.iter().enumerate() {
+                self.points[base + LANES * f] = x;
+            }
+        }
     }
 
     /// The partial sums of every tile, in parallel.
     fn sweep_tiles<T: PairTerms<F, C>>(&mut self, terms: &T, isa: Isa) {
         let Self {
-            tiling,
+            layout,
             scale,
             points,
             partials,
@@ -121,56 +166,49 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
         } = self;
         let (points, scale) = (&points[..], *scale);
         partials
-            .par_chunks_mut(2 * C * tiling.block)
-            .zip(&tiling.tiles)
+            .par_chunks_mut(2 * C * layout.block)
+            .zip(&layout.tiles)
             .for_each(|(buf, &(bi, bj))| {
                 let tile = Tile {
-                    rows: tiling.range(bi),
-                    cols: tiling.range(bj),
+                    rows: layout.range(bi),
+                    cols: layout.range(bj),
                     scale,
                 };
                 sweep_tile(isa, points, terms, &tile, buf);
             });
     }
 
-    /// `S(i)` for the rows of each block: the partial sums from the blocks `J = 0, 1, …` in
-    /// that order (row sums of tile (I, J) for J > I, column sums of tile (J, I) for J < I,
-    /// both for J = I), in parallel over blocks when there is enough work.
+    /// `S(i)` for the slots of each block: the partial sums of its tiles in their order (the
+    /// column sums of tiles (J, I), J < I, the row then the column sums of (I, I), the row sums
+    /// of (I, J), J > I), in parallel over blocks when there is enough work.
     fn reduce(&mut self) {
         let Self {
-            tiling,
+            layout,
             partials,
             sums,
             ..
         } = self;
-        let part_len = C * tiling.block;
+        let part_len = C * layout.block;
         // Blocks per task: enough additions to be worth a task of its own.
-        let min_blocks = (1 << 16) / (part_len * tiling.blocks).max(1);
+        let per_block = part_len * layout.tiles.len().div_ceil(layout.blocks).max(1);
+        let min_blocks = (1 << 16) / per_block.max(1);
         sums.par_chunks_mut(part_len)
-            .enumerate()
+            .zip(&layout.parts)
             .with_min_len(min_blocks.max(1))
-            .for_each(|(bi, block_sums)| {
+            .for_each(|(block_sums, parts)| {
                 block_sums.fill(0.0);
-                for bj in 0..tiling.blocks {
-                    let t = tiling.tile_index(bi.min(bj), bi.max(bj));
-                    let (row_part, col_part) =
-                        partials[2 * t * part_len..2 * (t + 1) * part_len].split_at(part_len);
-                    if bj >= bi {
-                        add_assign(block_sums, row_part);
-                    }
-                    if bj <= bi {
-                        add_assign(block_sums, col_part);
-                    }
+                for &p in parts {
+                    add_assign(block_sums, &partials[p * part_len..(p + 1) * part_len]);
                 }
             });
     }
 }
 
-/// Where number 0 of point `i` sits in an array of points carrying `fields` numbers each,
-/// stored in chunks of [`LANES`] points field after field; number `f` is `LANES·f` further.
+/// Where number 0 of slot `s` sits in an array of slots carrying `fields` numbers each,
+/// stored in chunks of [`LANES`] slots field after field; number `f` is `LANES·f` further.
 #[inline(always)]
-pub(super) fn chunked(i: usize, fields: usize) -> usize {
-    i / LANES * LANES * fields + i % LANES
+pub(super) fn chunked(s: usize, fields: usize) -> usize {
+    s / LANES * LANES * fields + s % LANES
 }
 
 /// `sums[n] += part[n]` for every `n < sums.len()`.
@@ -178,45 +216,137 @@ fn add_assign(sums: &mut [f64], part: &[f64]) {
     sums.iter_mut().zip(part).for_each(|(s, p)| *s += p);
 }
 
-/// The cut of the padded index range into blocks (the last one shorter), and the tiles (I, J),
-/// I ≤ J, row-major.
+/// The slots of the points, their cut into blocks (the last one shorter), the tiles (I, J),
+/// I ≤ J, that are swept, in row-major order, and the partial sums each block adds up.
 #[derive(Clone, Debug)]
-struct Tiling {
+struct Layout {
+    /// The slot of every point.
+    slot: Vec<usize>,
     padded: usize,
-    /// Rows of a block: a power of two in [`BLOCK_RANGE`], about a sixteenth of the points. It
-    /// depends on the number of points only, so that the order of the sums does not depend on
-    /// the number of threads.
+    /// Rows of a block: a multiple of [`LANES`] that depends on the number of points only, so
+    /// that the order of the sums does not depend on the number of threads.
     block: usize,
     blocks: usize,
     tiles: Vec<(usize, usize)>,
+    /// Per block, the partial sums to add in this order: `2t` the row sums of tile `t`,
+    /// `2t + 1` its column sums.
+    parts: Vec<Vec<usize>>,
 }
 
-impl Tiling {
-    fn new(landmarks: usize) -> Self {
+impl Layout {
+    /// Every point in its own slot, blocks of about a sixteenth of the points (a power of two
+    /// in [`BLOCK_RANGE`]), and every tile.
+    fn exact(landmarks: usize) -> Self {
         let padded = landmarks.div_ceil(LANES) * LANES;
         let block = (padded / 16)
             .next_power_of_two()
             .clamp(BLOCK_RANGE.0, BLOCK_RANGE.1);
-        let blocks = padded.div_ceil(block);
-        let tiles = (0..blocks)
-            .flat_map(|bi| (bi..blocks).map(move |bj| (bi, bj)))
+        let slot = (0..landmarks).collect();
+        Self::with_tiles(slot, padded, block, |_, _| true)
+    }
+
+    /// The points sorted along the Z-order curve of a grid of cells of side
+    /// `cutoff / CELLS_PER_CUTOFF` (ties by index), blocks of [`TRUNCATED_BLOCK`] slots, and the
+    /// tiles whose blocks' bounding boxes are at most `cutoff` apart (or not comparable:
+    /// non-finite coordinates).
+    fn truncated<const F: usize>(points: &[[f64; F]], cutoff: f64) -> Self {
+        let position = |i: usize| [points[i][0], points[i][1], points[i][2]];
+        let all = Aabb::of((0..points.len()).map(position));
+        let cell = cutoff / CELLS_PER_CUTOFF;
+        let mut order: Vec<usize> = (0..points.len()).collect();
+        order.sort_by_cached_key(|&i| (morton_code(position(i), all.lo, cell), i));
+        let mut slot = vec![0; points.len()];
+        for (s, &i) in order.iter().enumerate() {
+            slot[i] = s;
+        }
+        let padded = points.len().div_ceil(LANES) * LANES;
+        let boxes: Vec<Aabb> = order
+            .chunks(TRUNCATED_BLOCK)
+            .map(|block| Aabb::of(block.iter().map(|&i| position(i))))
             .collect();
+        let near = |bi: usize, bj: usize| !(boxes[bi].gap_squared(&boxes[bj]) > cutoff * cutoff);
+        Self::with_tiles(slot, padded, TRUNCATED_BLOCK, near)
+    }
+
+    /// The layout of `slot` with the tiles (I, J), I ≤ J, for which `swept(I, J)`.
+    fn with_tiles(
+        slot: Vec<usize>,
+        padded: usize,
+        block: usize,
+        swept: impl Fn(usize, usize) -> bool,
+    ) -> Self {
+        let blocks = padded.div_ceil(block);
+        let tiles: Vec<(usize, usize)> = (0..blocks)
+            .flat_map(|bi| (bi..blocks).map(move |bj| (bi, bj)))
+            .filter(|&(bi, bj)| swept(bi, bj))
+            .collect();
+        let mut parts = vec![Vec::new(); blocks];
+        for (t, &(bi, bj)) in tiles.iter().enumerate() {
+            parts[bi].push(2 * t);
+            parts[bj].push(2 * t + 1);
+        }
         Self {
+            slot,
             padded,
             block,
             blocks,
             tiles,
+            parts,
         }
     }
 
-    /// Indices of block `b`.
+    /// Slots of block `b`.
     fn range(&self, b: usize) -> Range<usize> {
         b * self.block..((b + 1) * self.block).min(self.padded)
     }
+}
 
-    /// Position of tile (bi, bj), bi ≤ bj, in the row-major list: `bi·blocks − bi(bi+1)/2 + bj`.
-    fn tile_index(&self, bi: usize, bj: usize) -> usize {
-        bi * self.blocks - bi * (bi + 1) / 2 + bj
+/// The Z-order (Morton) code of the cell of side `cell` holding `p`, cells counted from `lo`
+/// (at most 2²¹ per axis: farther cells share the last one, which changes only the order).
+fn morton_code(p: [f64; 3], lo: [f64; 3], cell: f64) -> u64 {
+    const MAX_CELL: f64 = ((1u64 << 21) - 1) as f64;
+    (0..3).fold(0, |code, axis| {
+        // A NaN coordinate goes to cell 0 (`as` saturates and maps NaN to 0).
+        let c = ((p[axis] - lo[axis]) / cell).clamp(0.0, MAX_CELL) as u64;
+        code | spread_bits(c) << axis
+    })
+}
+
+/// The 21 low bits of `x` moved to bits 0, 3, 6, … (for interleaving three of them).
+fn spread_bits(x: u64) -> u64 {
+    (0..21).fold(0, |out, b| out | ((x >> b) & 1) << (3 * b))
+}
+
+/// An axis-aligned bounding box.
+#[derive(Clone, Copy, Debug)]
+struct Aabb {
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
+impl Aabb {
+    /// The box of `points` (lo = +∞, hi = −∞ for none; NaN coordinates are left out).
+    fn of(points: impl Iterator<Item = [f64; 3]>) -> Self {
+        let empty = Self {
+            lo: [f64::INFINITY; 3],
+            hi: [f64::NEG_INFINITY; 3],
+        };
+        points.fold(empty, |b, p| Self {
+            lo: std::array::from_fn(|a| b.lo[a].min(p[a])),
+            hi: std::array::from_fn(|a| b.hi[a].max(p[a])),
+        })
+    }
+
+    /// The squared distance between the nearest points of the two boxes (0 if they meet).
+    fn gap_squared(&self, other: &Self) -> f64 {
+        (0..3)
+            .map(|a| {
+                let gap = (self.lo[a] - other.hi[a])
+                    .max(other.lo[a] - self.hi[a])
+                    .max(0.0);
+                gap * gap
+            })
+            .sum()
     }
 }
 
@@ -239,7 +369,12 @@ fn sweep_tile<const F: usize, const C: usize, T: PairTerms<F, C>>(
 ) {
     match isa {
         #[cfg(target_arch = "x86_64")]
-        Isa::Avx2Fma if Isa::best() == Isa::Avx2Fma => {
+        Isa::Avx512 if isa.is_supported() => {
+            // SAFETY: the running CPU supports AVX-512F, checked just above.
+            unsafe { sweep_tile_avx512(points, terms, tile, buf) }
+        }
+        #[cfg(target_arch = "x86_64")]
+        Isa::Avx2Fma if isa.is_supported() => {
             // SAFETY: the running CPU supports AVX2 and FMA, checked just above.
             unsafe { sweep_tile_avx2_fma(points, terms, tile, buf) }
         }
@@ -262,9 +397,24 @@ unsafe fn sweep_tile_avx2_fma<const F: usize, const C: usize, T: PairTerms<F, C>
     sweep_tile_with::<F, C, T, lanes::Avx2Fma>(points, terms, tile, buf)
 }
 
+/// [`sweep_tile_with`] on AVX-512 registers.
+///
+/// # Safety
+/// The CPU must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn sweep_tile_avx512<const F: usize, const C: usize, T: PairTerms<F, C>>(
+    points: &[f64],
+    terms: &T,
+    tile: &Tile,
+    buf: &mut [f64],
+) {
+    sweep_tile_with::<F, C, T, lanes::Avx512>(points, terms, tile, buf)
+}
+
 /// One tile with the lanes `V`, by the body compiled for its shape: diagonal or not.
 #[inline(always)]
-fn sweep_tile_with<const F: usize, const C: usize, T: PairTerms<F, C>, V: F64x4>(
+fn sweep_tile_with<const F: usize, const C: usize, T: PairTerms<F, C>, V: F64Lanes>(
     points: &[f64],
     terms: &T,
     tile: &Tile,
@@ -285,7 +435,7 @@ fn sweep_tile_body<
     const F: usize,
     const C: usize,
     T: PairTerms<F, C>,
-    V: F64x4,
+    V: F64Lanes,
     const DIAGONAL: bool,
 >(
     points: &[f64],
@@ -351,13 +501,13 @@ mod tests {
 
     impl TestTerms {
         /// `e·d` in every lane.
-        fn e_dot<V: F64x4>(d: &[V; 3]) -> V {
+        fn e_dot<V: F64Lanes>(d: &[V; 3]) -> V {
             d[2].mul_add(V::splat(-0.5), d[1].mul_add(V::splat(2.0), d[0]))
         }
     }
 
     impl PairTerms<4, 2> for TestTerms {
-        fn accumulate<V: F64x4>(
+        fn accumulate<V: F64Lanes>(
             &self,
             row: &[f64; 4],
             chunk: &[f64],
@@ -393,15 +543,35 @@ mod tests {
         out
     }
 
-    /// The sums of a sweep over `points` with the inner loops `isa`.
-    fn swept_sums(points: &[(Vec3, f64)], sigma: f64, isa: Isa) -> Vec<[f64; 2]> {
-        let kernel = GaussianKernel::new(sigma).unwrap();
+    /// The sums of a sweep over `points` with the kernel tolerance `eps` and the inner loops
+    /// `isa`, and the number of tiles swept.
+    fn swept_sums(
+        points: &[(Vec3, f64)],
+        sigma: f64,
+        eps: f64,
+        isa: Isa,
+    ) -> (Vec<[f64; 2]>, usize) {
+        let kernel = GaussianKernel::new(sigma).unwrap().truncated(eps).unwrap();
         let mut sweep = PairSweep::<4, 2>::new(&kernel, points.len());
         for (i, (q, w)) in points.iter().enumerate() {
             sweep.set_point(i, [q.x, q.y, q.z, *w]);
         }
         sweep.run_with(&TestTerms, isa);
-        (0..points.len()).map(|i| sweep.sums(i)).collect()
+        let sums = (0..points.len()).map(|i| sweep.sums(i)).collect();
+        (sums, sweep.layout.tiles.len())
+    }
+
+    /// Per point, `Σ_{j ≠ i} |t_c(i, j)|`: the sum that ε times bounds the truncation error.
+    fn term_magnitudes(points: &[(Vec3, f64)]) -> Vec<[f64; 2]> {
+        let e = Vec3::new(1.0, 2.0, -0.5);
+        (points.iter().enumerate())
+            .map(|(i, (qi, _))| {
+                (points.iter().enumerate().filter(|&(j, _)| j != i))
+                    .fold([0.0; 2], |[a, b], (_, (qj, wj))| {
+                        [a + wj.abs(), b + e.dot(&(qi - qj)).abs()]
+                    })
+            })
+            .collect()
     }
 
     fn random_points(seed: u64, k: usize) -> Vec<(Vec3, f64)> {
@@ -413,20 +583,58 @@ mod tests {
             .collect()
     }
 
-    #[test]
-    fn sums_are_the_same_bits_whatever_the_thread_count() {
-        // 2,100 points: blocks of 256, a short last block and padding.
-        let points = random_points(3, 2_100);
+    /// The sums of [`swept_sums`] on 1, 2 and 3 threads, checked equal.
+    fn same_on_any_thread_count(points: &[(Vec3, f64)], sigma: f64, eps: f64) {
         let with_threads = |n| {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(n)
                 .build()
                 .unwrap();
-            pool.install(|| swept_sums(&points, 1.5, Isa::best()))
+            pool.install(|| swept_sums(points, sigma, eps, Isa::best()).0)
         };
         let one = with_threads(1);
         assert_eq!(one, with_threads(2));
         assert_eq!(one, with_threads(3));
+    }
+
+    #[test]
+    fn sums_are_the_same_bits_whatever_the_thread_count() {
+        // 2,100 points: blocks of 256, a short last block and padding.
+        same_on_any_thread_count(&random_points(3, 2_100), 1.5, 0.0);
+    }
+
+    #[test]
+    fn truncated_sums_are_the_same_bits_whatever_the_thread_count() {
+        same_on_any_thread_count(&random_points(4, 2_100), 0.5, 1e-6);
+    }
+
+    #[test]
+    fn simd_implementations_give_the_same_bits() {
+        let points = random_points(5, 700);
+        for eps in [0.0, 1e-4] {
+            let sums: Vec<_> = (Isa::ALL.into_iter().skip(1))
+                .filter(|isa| isa.is_supported())
+                .map(|isa| swept_sums(&points, 1.0, eps, isa).0)
+                .collect();
+            assert!(sums.windows(2).all(|w| w[0] == w[1]), "ε = {eps}");
+        }
+    }
+
+    #[test]
+    fn truncation_skips_far_tiles() {
+        // Points along a line 1,000 long: with σ = 1, ε = 1e-10 (r ≈ 6.8), most blocks are far.
+        let points: Vec<(Vec3, f64)> = (0..4_000)
+            .map(|i| (Vec3::new(i as f64 * 0.25, 0.0, 0.0), 1.0))
+            .collect();
+        let (exact, all) = swept_sums(&points, 1.0, 0.0, Isa::best());
+        let (truncated, few) = swept_sums(&points, 1.0, 1e-10, Isa::best());
+        let blocks = 4_000usize.div_ceil(TRUNCATED_BLOCK);
+        assert!(few < 3 * blocks, "{few} tiles of {blocks} blocks");
+        assert!(all < few * blocks);
+        let magnitudes = term_magnitudes(&points);
+        for ((t, e), m) in truncated.iter().zip(&exact).zip(&magnitudes) {
+            assert!((t[0] - e[0]).abs() <= 1e-10 * m[0] + 1e-13 * m[0]);
+        }
     }
 
     proptest! {
@@ -434,8 +642,9 @@ mod tests {
         fn sums_match_direct_pair_sums(seed in 0u64..1000, k in 1usize..300, sigma in 0.3f64..4.0) {
             let points = random_points(seed, k);
             let direct = direct_sums(&points, sigma);
-            for isa in [Isa::Portable, Isa::best()] {
-                for (i, (s, d)) in swept_sums(&points, sigma, isa).iter().zip(&direct).enumerate() {
+            for isa in Isa::ALL.into_iter().filter(|isa| isa.is_supported()) {
+                let (sums, _) = swept_sums(&points, sigma, 0.0, isa);
+                for (i, (s, d)) in sums.iter().zip(&direct).enumerate() {
                     for c in 0..2 {
                         let (exact, tol) = d[c];
                         prop_assert!(
@@ -443,6 +652,31 @@ mod tests {
                             "{isa:?}, point {i}, sum {c}: {} vs {exact}", s[c]
                         );
                     }
+                }
+            }
+        }
+
+        /// The truncation bound: `|S^ε − S| ≤ ε Σ_j |t(i, j)|` (plus the rounding of the sums).
+        #[test]
+        fn truncated_sums_are_within_the_tolerance_bound(
+            seed in 0u64..1000,
+            k in 1usize..700,
+            sigma in 0.2f64..2.0,
+            log_eps in -12.0f64..-0.4,
+        ) {
+            let eps = 10f64.powf(log_eps);
+            let points = random_points(seed, k);
+            let direct = direct_sums(&points, sigma);
+            let magnitudes = term_magnitudes(&points);
+            let (sums, _) = swept_sums(&points, sigma, eps, Isa::best());
+            for (i, ((s, d), m)) in sums.iter().zip(&direct).zip(&magnitudes).enumerate() {
+                for c in 0..2 {
+                    let (exact, tol) = d[c];
+                    let bound = eps * m[c] + tol + 1e-300;
+                    prop_assert!(
+                        (s[c] - exact).abs() <= bound,
+                        "ε = {eps}, point {i}, sum {c}: {} vs {exact}, bound {bound}", s[c]
+                    );
                 }
             }
         }
