@@ -157,6 +157,7 @@ unsafe fn fma_chains_avx2(seed: f64) -> f64 {
 /// The CPU must support AVX-512F.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
+#[allow(clippy::incompatible_msrv)] // AVX-512 intrinsics: stable since 1.89, as in the kernel.
 unsafe fn fma_chains_avx512(seed: f64) -> f64 {
     use std::arch::x86_64::*;
     let (a, b) = (_mm512_set1_pd(0.999_999), _mm512_set1_pd(1e-7));
