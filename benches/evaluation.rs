@@ -157,6 +157,7 @@ unsafe fn fma_chains_avx2(seed: f64) -> f64 {
 /// The CPU must support AVX-512F.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
+#[allow(clippy::incompatible_msrv)] // AVX-512 intrinsics: stable since 1.89, as in the kernel.
 unsafe fn fma_chains_avx512(seed: f64) -> f64 {
     use std::arch::x86_64::*;
     let (a, b) = (_mm512_set1_pd(0.999_999), _mm512_set1_pd(1e-7));
@@ -172,6 +173,10 @@ unsafe fn fma_chains_avx512(seed: f64) -> f64 {
     )
 }
 
+/// A peak loop: [`fma_chains_avx2`] or [`fma_chains_avx512`].
+#[cfg(target_arch = "x86_64")]
+type PeakLoop = unsafe fn(f64) -> f64;
+
 /// The f64 multiply-add peak: [`fma_chains_avx2`] and [`fma_chains_avx512`] on every thread of
 /// the pool at once.
 #[cfg(target_arch = "x86_64")]
@@ -180,7 +185,7 @@ fn peak(c: &mut Criterion) {
     let threads = rayon::current_num_threads();
     let mut group = c.benchmark_group("peak");
     group.sample_size(10);
-    let kinds: [(&str, usize, bool, unsafe fn(f64) -> f64); 2] = [
+    let kinds: [(&str, usize, bool, PeakLoop); 2] = [
         (
             "fma_avx2",
             4,

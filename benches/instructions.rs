@@ -1,5 +1,5 @@
-//! The workloads whose instructions `benches/instructions.sh` counts with callgrind: one value
-//! + gradient evaluation of the objective at k = 503 (t001, N = 40, SSD), and one value +
+//! The workloads whose instructions `benches/instructions.sh` counts with callgrind: one value and
+//! gradient evaluation of the objective at k = 503 (t001, N = 40, SSD), and one value +
 //! gradient of the Dice attachment (t001 against its own rasterization, 0.5 mm voxels, the
 //! default sampling). `instructions CASE` sets the case up, then runs it once inside the
 //! function `measured`, the only one callgrind counts (`--toggle-collect`); run it with one

@@ -195,7 +195,10 @@ impl F64Lanes for Portable {
 #[cfg(target_arch = "x86_64")]
 pub(crate) use x86::{Avx2Fma, Avx512};
 
+// The AVX-512 intrinsics are stable since Rust 1.89, after the workspace's MSRV: older
+// compilers cannot build this module (raising the MSRV would bring newer lints everywhere).
 #[cfg(target_arch = "x86_64")]
+#[allow(clippy::incompatible_msrv)]
 mod x86 {
     use super::{F64Lanes, Real, LANES};
     use std::arch::x86_64::*;

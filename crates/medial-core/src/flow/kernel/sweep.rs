@@ -264,7 +264,11 @@ impl Layout {
             .chunks(TRUNCATED_BLOCK)
             .map(|block| Aabb::of(block.iter().map(|&i| position(i))))
             .collect();
-        let near = |bi: usize, bj: usize| !(boxes[bi].gap_squared(&boxes[bj]) > cutoff * cutoff);
+        // Kept unless provably far: a NaN gap (non-finite coordinates) keeps the tile.
+        let near = |bi: usize, bj: usize| {
+            let gap = boxes[bi].gap_squared(&boxes[bj]);
+            gap.partial_cmp(&(cutoff * cutoff)) != Some(std::cmp::Ordering::Greater)
+        };
         Self::with_tiles(slot, padded, TRUNCATED_BLOCK, near)
     }
 
