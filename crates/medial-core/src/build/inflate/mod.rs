@@ -27,6 +27,7 @@ mod intersect;
 mod regions;
 mod sheet;
 
+pub(crate) use regions::UnionFind;
 pub use sheet::MedialSheet;
 
 use crate::{Result, TriMesh, Vec3};
