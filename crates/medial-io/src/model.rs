@@ -2,7 +2,7 @@
 //! configuration of its landmarks with the medial figures as point arrays, for ParaView.
 
 use crate::cmrep::template_from_polydata;
-use crate::vtk::{read_polydata, ArrayKind, DataArray, PolyData, ValueType};
+use crate::vtk::{read_polydata, scalars, PolyData, ValueType};
 use crate::{Error, Result};
 use medial_core::model::fidelity::Fidelity;
 use medial_core::model::{Model, SpokeMetrics};
@@ -96,14 +96,4 @@ pub fn medial_polydata(model: &Model, q: &[Vec3], fidelity: &Fidelity) -> Option
 
 fn cells(triangles: &[[usize; 3]]) -> Vec<Vec<usize>> {
     triangles.iter().map(|t| t.to_vec()).collect()
-}
-
-fn scalars(name: &str, values: Vec<f64>, value_type: ValueType) -> DataArray {
-    DataArray {
-        name: name.into(),
-        components: 1,
-        values,
-        kind: ArrayKind::Scalars,
-        value_type,
-    }
 }

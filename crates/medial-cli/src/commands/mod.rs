@@ -1,7 +1,8 @@
 //! The commands of `medial`, one module each: [`fit`] and [`eval`] run a TOML schedule;
 //! [`inflate`], [`project`] and [`synth`] build templates and synthetic cases; [`rasterize`]
 //! turns a closed mesh into a mask; [`report`] writes the views of a fit folder again;
-//! [`check`] measures whether the medial points stay the centres of inscribed balls.
+//! [`check`] measures whether the medial points stay the centres of inscribed balls;
+//! [`template`] builds a template from a shape (a segmentation or a closed mesh).
 
 mod check;
 mod eval;
@@ -11,6 +12,7 @@ mod project;
 mod rasterize;
 mod report;
 mod synth;
+mod template;
 
 use crate::config::Config;
 use crate::error::CliError;
@@ -91,6 +93,11 @@ pub enum Command {
     /// cmrep template, a target segmentation and the target boundary points from a known
     /// twist + bend + affine deformation, the affine part, and ready configs.
     Synth(synth::SynthArgs),
+    /// Build a medial template from a shape (a segmentation or a closed mesh): its medial sheet
+    /// (exact distance transform, ridge, a regular ring disc with a radius per vertex), one Loop
+    /// subdivision, inflation, projection, the automatic Dice fit to the shape itself and
+    /// projection again; writes TEMPLATE.vtk and its figures as JSON (printed too).
+    Template(template::TemplateArgs),
     /// Rasterize a closed triangle mesh into a binary NIfTI mask.
     Rasterize(rasterize::RasterizeArgs),
     /// Write report.html, flow.glb and the ParaView series (flow/*.vtk.series) of a fit folder
@@ -180,6 +187,7 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
         Command::Inflate(args) => inflate::run(&args)?,
         Command::Project(args) => project::run(&args)?,
         Command::Synth(args) => synth::run(&args)?,
+        Command::Template(args) => template::run(&args, threads, quiet)?,
         Command::Rasterize(args) => rasterize::run(&args)?,
         Command::Report(args) => report::run(&args)?,
         Command::Check(args) => check::run(&args)?,

@@ -43,7 +43,7 @@ mod series;
 mod text;
 mod writer;
 
-pub use polydata::{ArrayKind, DataArray, PolyData, ValueType};
+pub use polydata::{scalars, ArrayKind, DataArray, PolyData, ValueType};
 pub use reader::{parse_polydata, read_polydata, read_trimesh};
 pub(crate) use scalar::push_f64;
 pub use series::{series_json, write_series, SeriesFile};

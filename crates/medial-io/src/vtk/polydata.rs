@@ -49,6 +49,17 @@ pub struct DataArray {
     pub value_type: ValueType,
 }
 
+/// A one-component array of scalars named `name`.
+pub fn scalars(name: &str, values: Vec<f64>, value_type: ValueType) -> DataArray {
+    DataArray {
+        name: name.into(),
+        components: 1,
+        values,
+        kind: ArrayKind::Scalars,
+        value_type,
+    }
+}
+
 /// Legacy VTK `DATASET POLYDATA`.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PolyData {

@@ -136,7 +136,11 @@ mod tests {
         let points: Vec<Vec3> = (0..200)
             .map(|n| {
                 let (theta, phi) = (1.2 * (n % 10) as f64 / 9.0, 0.7 * (n / 10) as f64);
-                c + r * Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos())
+                c + r * Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.sin() * phi.sin(),
+                    theta.cos(),
+                )
             })
             .collect();
         let chart = Chart::fit(&points).unwrap();

@@ -15,20 +15,59 @@ use crate::{Error, Result, Vec3};
 /// Angular bins of the outline `R(φ)` of the cloud in the chart.
 const OUTLINE_BINS: usize = 72;
 /// The outline in a bin is this quantile of the chart radii in it (ignores stray points).
-const OUTLINE_QUANTILE: f64 = 0.98;
+const OUTLINE_QUANTILE: f64 = 0.95;
 /// Fewest points a vertex's window must hold for a linear fit.
 const MIN_POINTS: usize = 8;
 
-/// The medial points in chart coordinates.
-pub(super) struct ChartedCloud<'a> {
-    points: &'a [MedialPoint],
+/// A point whose radius is below this fraction of the [`REFERENCE_QUANTILE`] of the radii
+/// around it is a spur and is dropped.
+const SPUR_FRACTION: f64 = 0.5;
+/// The quantile of the radii in a neighbourhood that a point's radius is compared with.
+const REFERENCE_QUANTILE: f64 = 0.9;
+
+/// The medial points in chart coordinates, without spurs.
+pub(super) struct ChartedCloud {
+    points: Vec<MedialPoint>,
     coords: Vec<[f64; 2]>,
 }
 
-impl<'a> ChartedCloud<'a> {
-    pub(super) fn new(points: &'a [MedialPoint], chart: &Chart) -> Self {
-        let coords = points.iter().map(|p| chart.coords(&p.position)).collect();
-        Self { points, coords }
+impl ChartedCloud {
+    /// The points in the chart, with `window` (mm) less the spurs: points whose radius is below
+    /// [`SPUR_FRACTION`] of the [`REFERENCE_QUANTILE`] of the radii within about `window` mm in
+    /// the chart. A
+    /// boundary crease or bump makes a branch of the medial axis that runs from the surface
+    /// (radius 0) to the sheet; its part far from the sheet has small radii against the
+    /// sheet's around it, while a sheet's own radius varies slowly (`|∇r| < 1`).
+    pub(super) fn new(points: &[MedialPoint], chart: &Chart, window: Option<f64>) -> Self {
+        let coords: Vec<[f64; 2]> = points.iter().map(|p| chart.coords(&p.position)).collect();
+        let Some(window) = window else {
+            return Self {
+                points: points.to_vec(),
+                coords,
+            };
+        };
+        let buckets = Buckets::new(&coords, window);
+        let mut reference: HashMap<[i64; 2], f64> = HashMap::new();
+        for key in buckets.cells.keys() {
+            let mut radii: Vec<f64> = buckets.around(*key).map(|i| points[i].radius).collect();
+            radii.sort_by(f64::total_cmp);
+            let r = radii[((radii.len() - 1) as f64 * REFERENCE_QUANTILE) as usize];
+            reference.insert(*key, r);
+        }
+        let keep: Vec<usize> = (0..points.len())
+            .filter(|&i| {
+                points[i].radius >= SPUR_FRACTION * reference[&Buckets::key(&coords[i], window)]
+            })
+            .collect();
+        Self {
+            points: keep.iter().map(|&i| points[i]).collect(),
+            coords: keep.iter().map(|&i| coords[i]).collect(),
+        }
+    }
+
+    /// The medial points kept.
+    pub(super) fn len(&self) -> usize {
+        self.points.len()
     }
 
     /// The outline `R(φ)` of the cloud about the chart centre: [`OUTLINE_QUANTILE`] of `|q|` in
@@ -86,7 +125,7 @@ fn outline_at(outline: &[f64], phi: f64) -> f64 {
 /// Errors: `InvalidVolume` when a vertex has fewer than [`MIN_POINTS`] points in its window
 /// (a hole in the sheet); those of [`MedialSheet::new`].
 pub(super) fn disc_sheet(
-    cloud: &ChartedCloud<'_>,
+    cloud: &ChartedCloud,
     outline: &[f64],
     rings: usize,
     window: f64,
@@ -119,14 +158,15 @@ pub(super) fn disc_sheet(
 /// The value at `q0` of the weighted local linear fit of position and radius (see
 /// [`disc_sheet`]).
 fn local_fit(
-    cloud: &ChartedCloud<'_>,
+    cloud: &ChartedCloud,
     near: &[usize],
     q0: [f64; 2],
     window: f64,
     voxel: f64,
 ) -> Result<(Vec3, f64)> {
     let sigma = window / 2.0;
-    let offset = |i: usize| Vector3::new(1.0, cloud.coords[i][0] - q0[0], cloud.coords[i][1] - q0[1]);
+    let offset =
+        |i: usize| Vector3::new(1.0, cloud.coords[i][0] - q0[0], cloud.coords[i][1] - q0[1]);
     let base: Vec<f64> = near
         .iter()
         .map(|&i| {
@@ -141,12 +181,20 @@ fn local_fit(
             let x = offset(i);
             a += w * x * x.transpose();
             let p = cloud.points[i].position;
-            for (k, v) in [p.x, p.y, p.z, cloud.points[i].radius].into_iter().enumerate() {
+            for (k, v) in [p.x, p.y, p.z, cloud.points[i].radius]
+                .into_iter()
+                .enumerate()
+            {
                 b[k] += w * v * x;
             }
         }
         let lu = a.lu();
-        Some([lu.solve(&b[0])?, lu.solve(&b[1])?, lu.solve(&b[2])?, lu.solve(&b[3])?])
+        Some([
+            lu.solve(&b[0])?,
+            lu.solve(&b[1])?,
+            lu.solve(&b[2])?,
+            lu.solve(&b[3])?,
+        ])
     };
     let first = solve(&base).ok_or_else(|| {
         Error::InvalidVolume(format!(
@@ -189,13 +237,18 @@ impl Buckets {
         [(q[0] / cell).floor() as i64, (q[1] / cell).floor() as i64]
     }
 
-    /// The points within `radius ≤ cell` of `q0`, ascending.
-    fn within(&self, coords: &[[f64; 2]], q0: [f64; 2], radius: f64) -> Vec<usize> {
-        let k = Self::key(&q0, self.cell);
-        let mut found: Vec<usize> = (0..9)
-            .filter_map(|d| self.cells.get(&[k[0] + d % 3 - 1, k[1] + d / 3 - 1]))
+    /// The points in cell `k` and the eight around it.
+    fn around(&self, k: [i64; 2]) -> impl Iterator<Item = usize> + '_ {
+        (0..9)
+            .filter_map(move |d| self.cells.get(&[k[0] + d % 3 - 1, k[1] + d / 3 - 1]))
             .flatten()
             .copied()
+    }
+
+    /// The points within `radius ≤ cell` of `q0`, ascending.
+    fn within(&self, coords: &[[f64; 2]], q0: [f64; 2], radius: f64) -> Vec<usize> {
+        let mut found: Vec<usize> = self
+            .around(Self::key(&q0, self.cell))
             .filter(|&i| (coords[i][0] - q0[0]).hypot(coords[i][1] - q0[1]) <= radius)
             .collect();
         found.sort_unstable();

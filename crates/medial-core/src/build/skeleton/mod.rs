@@ -54,6 +54,8 @@ pub struct ShapeSheet {
     pub sheet: MedialSheet,
     /// The medial points found (after dropping islands).
     pub medial_points: Vec<MedialPoint>,
+    /// How many of them were kept as not on spurs ([`disc::ChartedCloud::new`]).
+    pub spur_free_points: usize,
     /// The chart the sheet was sampled in.
     pub chart: Chart,
     /// Rings of the disc.
@@ -69,19 +71,26 @@ pub fn sheet_of_mask(mask: &Volume, sampling: Sampling) -> Result<ShapeSheet> {
     let points = medial_points(mask, MIN_FEATURE_ANGLE_DEG)?;
     let positions: Vec<_> = points.iter().map(|p| p.position).collect();
     let chart = Chart::fit(&positions)?;
-    let cloud = ChartedCloud::new(&points, &chart);
-    let outline = cloud.outline()?;
-    let mean_outline = outline.iter().sum::<f64>() / outline.len() as f64;
-    let rings = rings_of(sampling, mean_outline)?;
     let voxel = mask.spacing().mean();
+    // A first outline, of every point, sets the sampling and the window; the sheet is fitted
+    // to the points without spurs.
+    let all = ChartedCloud::new(&points, &chart, None);
+    let mean_outline = mean(&all.outline()?);
+    let rings = rings_of(sampling, mean_outline)?;
     let window = (3.0 * voxel).max(0.5 * mean_outline / rings as f64);
-    let sheet = disc_sheet(&cloud, &outline, rings, window, voxel)?;
+    let cloud = ChartedCloud::new(&points, &chart, Some(window));
+    let sheet = disc_sheet(&cloud, &cloud.outline()?, rings, window, voxel)?;
     Ok(ShapeSheet {
         sheet,
+        spur_free_points: cloud.len(),
         medial_points: points,
         chart,
         rings,
     })
+}
+
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len() as f64
 }
 
 /// The rings of the disc for `sampling` on a sheet of mean chart radius `extent` mm (at least
@@ -98,4 +107,3 @@ fn rings_of(sampling: Sampling, extent: f64) -> Result<usize> {
     };
     Ok((rings.round() as usize).clamp(2, 64))
 }
-

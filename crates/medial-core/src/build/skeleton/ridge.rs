@@ -101,7 +101,11 @@ fn orthogonal_spacing(mask: &Volume) -> Result<[f64; 3]> {
 }
 
 fn index_of(n: usize, dims: [usize; 3]) -> [usize; 3] {
-    [n % dims[0], (n / dims[0]) % dims[1], n / (dims[0] * dims[1])]
+    [
+        n % dims[0],
+        (n / dims[0]) % dims[1],
+        n / (dims[0] * dims[1]),
+    ]
 }
 
 /// Refuses a mask with an inside voxel on the border of the grid: the boundary beyond it is not
@@ -205,8 +209,14 @@ mod tests {
     #[test]
     fn refuses_a_shape_on_the_border_and_an_empty_one() {
         let full = Volume::new([3, 3, 3], vec![1.0; 27], Matrix4::identity()).unwrap();
-        assert!(matches!(medial_points(&full, 100.0), Err(Error::InvalidVolume(_))));
+        assert!(matches!(
+            medial_points(&full, 100.0),
+            Err(Error::InvalidVolume(_))
+        ));
         let empty = Volume::new([3, 3, 3], vec![0.0; 27], Matrix4::identity()).unwrap();
-        assert!(matches!(medial_points(&empty, 100.0), Err(Error::InvalidVolume(_))));
+        assert!(matches!(
+            medial_points(&empty, 100.0),
+            Err(Error::InvalidVolume(_))
+        ));
     }
 }
