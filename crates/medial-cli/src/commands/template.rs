@@ -95,7 +95,7 @@ pub struct TemplateArgs {
 /// The shape as read.
 enum Shape {
     /// A binary mask on the input's grid (1 inside).
-    Mask(Volume),
+    Mask(Box<Volume>),
     /// A closed triangle mesh (mm).
     Mesh(TriMesh),
 }
@@ -108,7 +108,7 @@ impl Shape {
             .any(|e| name.ends_with(e))
         {
             let image = medial_io::volume::read_volume(&args.shape)?;
-            Ok(Self::Mask(image.foreground(args.label)))
+            Ok(Self::Mask(Box::new(image.foreground(args.label))))
         } else if args.label.is_some() {
             Err(CliError::Usage("--label needs a segmentation".into()))
         } else {

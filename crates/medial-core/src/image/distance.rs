@@ -59,8 +59,8 @@ impl FeatureTransform {
         let mut feature: Vec<u32> = (0..count as u32)
             .map(|n| if inside[n as usize] { NO_FEATURE } else { n })
             .collect();
-        for axis in 0..3 {
-            envelope_pass(&mut squared, &mut feature, dims, axis, spacing[axis]);
+        for (axis, &s) in spacing.iter().enumerate() {
+            envelope_pass(&mut squared, &mut feature, dims, axis, s);
         }
         Ok(Self {
             dims,
