@@ -20,9 +20,9 @@
 //! | [`flow::ambient`] | the fitted flow of any point of space, forward and inverse | [`flow::ambient::AmbientFlow`] |
 //! | [`attachment`] | data terms: SSD to corresponding points, Dice against an image | [`attachment::ssd::Ssd`], [`attachment::dice::DiceAttachment`] |
 //! | [`attachment::varifold`] | surfaces without correspondence: varifold, oriented varifold, current | [`attachment::varifold::Varifold`], [`attachment::varifold::default_width`] |
-//! | [`image`] | volumes in world space, rasterization of closed meshes | [`image::Volume`], [`image::rasterize`] |
+//! | [`image`] | volumes in world space, rasterization of closed meshes, distance and feature transform | [`image::Volume`], [`image::rasterize`], [`image::distance`] |
 //! | [`fit`] | objective, L-BFGS, the augmented-Lagrangian schedule of a stage | [`fit::Objective`], [`fit::run_stage`] |
-//! | [`build`] | templates from a medial sheet: inflation, projection onto the constraints | [`build::inflate()`], [`build::project()`] |
+//! | [`build`] | templates from a shape (its medial sheet) and from a medial sheet: inflation, projection onto the constraints | [`build::sheet_of_mask`], [`build::inflate()`], [`build::project()`] |
 //! | [`synth`] | synthetic cases with a known deformation | [`synth::SyntheticCase`], [`synth::Warp`] |
 //! | [`testing`] | the dense reference implementation and small fixtures | [`testing::dense`] |
 //!

@@ -1,7 +1,7 @@
 //! Medial sheets ([`MedialSheet`]): a triangle mesh of medial points (mm), possibly non-manifold,
-//! with a radius per vertex (mm), read from legacy VTK polydata.
+//! with a radius per vertex (mm), read from and written to legacy VTK polydata.
 
-use crate::vtk::read_polydata;
+use crate::vtk::{read_polydata, write_polydata, DataArray, PolyData, ValueType, WriteOptions};
 use crate::{Error, Result};
 use medial_core::build::MedialSheet;
 use std::path::Path;
@@ -33,4 +33,16 @@ pub fn read_sheet(path: &Path, radius_array: &str) -> Result<MedialSheet> {
     }
     MedialSheet::new(data.points.clone(), triangles, radius.values.clone())
         .map_err(|e| Error::model(path, e))
+}
+
+/// Writes a medial sheet as VTK polydata: its points and triangles, and its radii as the point
+/// array `Radius` (mm), the file [`read_sheet`] reads and `medial inflate` takes.
+pub fn write_sheet(path: &Path, sheet: &MedialSheet, options: WriteOptions) -> Result<()> {
+    let mut data = PolyData::from_triangles(sheet.points(), sheet.triangles());
+    data.point_data.push(DataArray::scalars(
+        "Radius",
+        sheet.radius().to_vec(),
+        ValueType::Double,
+    ));
+    write_polydata(path, &data, options)
 }

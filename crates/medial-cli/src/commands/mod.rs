@@ -2,7 +2,8 @@
 //! [`inflate`], [`project`] and [`synth`] build templates and synthetic cases; [`rasterize`]
 //! turns a closed mesh into a mask; [`report`] writes the views of a fit folder again;
 //! [`check`] measures whether the medial points stay the centres of inscribed balls; [`apply`]
-//! carries other data by the map of a fit; [`batch`] fits a cohort of subjects and gathers it.
+//! carries other data by the map of a fit; [`batch`] fits a cohort of subjects and gathers it;
+//! [`template`] builds a template from a shape (a segmentation or a closed mesh).
 
 mod apply;
 mod batch;
@@ -14,6 +15,7 @@ mod project;
 mod rasterize;
 mod report;
 mod synth;
+mod template;
 
 use crate::config::Config;
 use crate::error::CliError;
@@ -94,6 +96,11 @@ pub enum Command {
     /// cmrep template, a target segmentation and the target boundary points from a known
     /// twist + bend + affine deformation, the affine part, and ready configs.
     Synth(synth::SynthArgs),
+    /// Build a medial template from a shape (a segmentation or a closed mesh): its medial sheet
+    /// (exact distance transform, ridge, a regular ring disc with a radius per vertex), one Loop
+    /// subdivision, inflation, projection, the automatic Dice fit to the shape itself and
+    /// projection again; writes TEMPLATE.vtk and its figures as JSON (printed too).
+    Template(template::TemplateArgs),
     /// Rasterize a closed triangle mesh into a binary NIfTI mask.
     Rasterize(rasterize::RasterizeArgs),
     /// Write report.html, flow.glb and the ParaView series (flow/*.vtk.series) of a fit folder
@@ -194,6 +201,7 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
         Command::Inflate(args) => inflate::run(&args)?,
         Command::Project(args) => project::run(&args)?,
         Command::Synth(args) => synth::run(&args)?,
+        Command::Template(args) => template::run(&args, threads, quiet)?,
         Command::Rasterize(args) => rasterize::run(&args)?,
         Command::Report(args) => report::run(&args)?,
         Command::Check(args) => check::run(&args)?,

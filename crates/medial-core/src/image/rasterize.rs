@@ -59,11 +59,26 @@ pub fn voxel_dice(mesh: &TriMesh, mask: &Volume) -> Result<f64> {
 }
 
 /// An axis-aligned grid of isotropic spacing `spacing_mm` covering the bounding box of `mesh`
-/// plus `margin_mm` on every side, centred on the box: `n_a = ⌈(extent_a + 2·margin)/h⌉ + 1`
-/// voxels along axis `a`. Returns `(dims, voxel_to_world)`. Refuses a non-positive or
-/// non-finite spacing, a negative or non-finite margin and a mesh without points.
+/// plus `margin_mm` on every side ([`grid_around_bounds`]). Returns `(dims, voxel_to_world)`.
+/// Refuses a non-positive or non-finite spacing, a negative or non-finite margin and a mesh
+/// without points.
 pub fn grid_around(
     mesh: &TriMesh,
+    spacing_mm: f64,
+    margin_mm: f64,
+) -> Result<([usize; 3], Matrix4<f64>)> {
+    let bounds = Bounds::of(mesh.points()).ok_or_else(|| {
+        Error::InvalidMesh("cannot build a grid around a mesh without points".into())
+    })?;
+    grid_around_bounds(&bounds, spacing_mm, margin_mm)
+}
+
+/// An axis-aligned grid of isotropic spacing `spacing_mm` covering `bounds` plus `margin_mm`
+/// on every side, centred on the box: `n_a = ⌈(extent_a + 2·margin)/h⌉ + 1` voxels along axis
+/// `a`. Returns `(dims, voxel_to_world)`. Refuses a non-positive or non-finite spacing and a
+/// negative or non-finite margin.
+pub fn grid_around_bounds(
+    bounds: &Bounds,
     spacing_mm: f64,
     margin_mm: f64,
 ) -> Result<([usize; 3], Matrix4<f64>)> {
@@ -77,9 +92,6 @@ pub fn grid_around(
             "grid margin must be a finite number of mm ≥ 0, got {margin_mm}"
         )));
     }
-    let bounds = Bounds::of(mesh.points()).ok_or_else(|| {
-        Error::InvalidMesh("cannot build a grid around a mesh without points".into())
-    })?;
     let extent = bounds.extent() + Vec3::repeat(2.0 * margin_mm);
     let steps = extent.map(|e| (e / spacing_mm).ceil());
     if steps.iter().any(|&s| s > 1e7) {

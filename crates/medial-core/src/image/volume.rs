@@ -214,6 +214,26 @@ impl Volume {
         Bounds::of(&corners)
     }
 
+    /// The image sampled ([`Self::sample`], trilinear) at the voxel centres of the grid `dims`,
+    /// `voxel_to_world`. Parallel over `k` slices, deterministic.
+    ///
+    /// Errors: those of [`Volume::new`] for the new grid.
+    pub fn resampled(&self, dims: [usize; 3], voxel_to_world: Matrix4<f64>) -> Result<Self> {
+        let [nx, ny, nz] = dims;
+        voxel_count(dims)?;
+        check_affine(&voxel_to_world)?;
+        let data: Vec<f64> = (0..nz)
+            .into_par_iter()
+            .flat_map_iter(|k| {
+                (0..nx * ny).map(move |n| {
+                    let v = Vector4::new((n % nx) as f64, (n / nx) as f64, k as f64, 1.0);
+                    self.sample(&(voxel_to_world * v).xyz())
+                })
+            })
+            .collect();
+        Self::new(dims, data, voxel_to_world)
+    }
+
     /// `∫ f = Σ values × voxel volume` (mm³ for a mask).
     pub fn integral(&self) -> f64 {
         self.data.iter().sum::<f64>() * self.voxel_volume()

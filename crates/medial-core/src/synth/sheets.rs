@@ -13,7 +13,7 @@ use std::f64::consts::{PI, TAU};
 /// points at angles `2πj/(6i)`. Returns `(radial fraction i/rings, angle)` per point and the
 /// triangles, counter-clockwise in the disc's plane. Consecutive rings are zipped in angular
 /// order, so every triangle has at most one edge on the outer ring.
-fn hex_disc(rings: usize) -> (Vec<[f64; 2]>, Vec<[usize; 3]>) {
+pub(crate) fn hex_disc(rings: usize) -> (Vec<[f64; 2]>, Vec<[usize; 3]>) {
     let mut params = vec![[0.0, 0.0]];
     let mut triangles = Vec::new();
     let mut inner: Vec<usize> = vec![0];

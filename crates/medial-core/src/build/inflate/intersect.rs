@@ -16,7 +16,7 @@ pub(super) const SNAP: f64 = 1e-10;
 /// vertex of one crosses the other). Broad phase: a uniform grid of cubes about the mean
 /// triangle size; each candidate pair is tested once, in the cell of the lower corner of the
 /// intersection of their boxes.
-pub(super) fn self_intersections(mesh: &TriMesh) -> Vec<(usize, usize)> {
+pub fn self_intersections(mesh: &TriMesh) -> Vec<(usize, usize)> {
     let points = mesh.points();
     let tris: Vec<[Vec3; 3]> = mesh
         .triangles()

@@ -27,6 +27,8 @@ mod intersect;
 mod regions;
 mod sheet;
 
+pub use intersect::self_intersections;
+pub(crate) use regions::UnionFind;
 pub use sheet::MedialSheet;
 
 use crate::{Result, TriMesh, Vec3};

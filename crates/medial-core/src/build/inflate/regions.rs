@@ -12,14 +12,14 @@ pub(super) fn slot(t: usize, side: usize, k: usize) -> usize {
 }
 
 /// Union-find over slots, with path halving; the root of a set is its smallest slot.
-pub(super) struct UnionFind(pub(super) Vec<usize>);
+pub(crate) struct UnionFind(pub(super) Vec<usize>);
 
 impl UnionFind {
-    pub(super) fn new(n: usize) -> Self {
+    pub(crate) fn new(n: usize) -> Self {
         Self((0..n).collect())
     }
 
-    pub(super) fn find(&mut self, mut x: usize) -> usize {
+    pub(crate) fn find(&mut self, mut x: usize) -> usize {
         while self.0[x] != x {
             self.0[x] = self.0[self.0[x]];
             x = self.0[x];
@@ -27,7 +27,7 @@ impl UnionFind {
         x
     }
 
-    pub(super) fn union(&mut self, a: usize, b: usize) {
+    pub(crate) fn union(&mut self, a: usize, b: usize) {
         let (ra, rb) = (self.find(a), self.find(b));
         self.0[ra.max(rb)] = ra.min(rb);
     }
