@@ -87,10 +87,6 @@ pub fn write(
         Ok(())
     })?;
     let flat: Vec<f64> = rows.iter().flatten().copied().collect();
-    medial_io::npy::write_npy(
-        &set.file("atoms.npy")?,
-        &[rows.len(), COLUMNS.len()],
-        &flat,
-    )?;
+    medial_io::npy::write_npy(&set.file("atoms.npy")?, &[rows.len(), COLUMNS.len()], &flat)?;
     Ok(())
 }

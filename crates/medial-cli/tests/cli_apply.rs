@@ -31,7 +31,7 @@ fn fit_dir() -> &'static Path {
     let (_, out) = FIT.get_or_init(|| {
         let dir = tempfile::tempdir().unwrap();
         let config = dir.path().join("fit.toml");
-        let text = format!(
+        let toml = format!(
             "[model]\ntemplate = \"{}\"\n[flow]\nsigma = 1.41\ntime_steps = {STEPS}\n\
              kinetic_weight = 0.005\n[output]\nevery_time_point = true\n[[stage]]\n\
              name = \"boundary\"\nattachment = \"ssd\"\ntarget = \"{}\"\nmu = 20.0\n\
@@ -40,7 +40,7 @@ fn fit_dir() -> &'static Path {
             example("template.vtk").display(),
             example("target_boundary.vtk").display()
         );
-        std::fs::write(&config, text).unwrap();
+        std::fs::write(&config, toml).unwrap();
         let out = dir.path().join("out");
         let o = medial(&["fit", s(&config), "--out", s(&out), "-q"]);
         assert!(o.status.success(), "the fit failed: {}", text(&o.stderr));
@@ -57,7 +57,10 @@ fn apply(args: &[&str]) -> Value {
 
 fn max_distance(a: &[Vec3], b: &[Vec3]) -> f64 {
     assert_eq!(a.len(), b.len());
-    a.iter().zip(b).map(|(p, q)| (p - q).norm()).fold(0.0, f64::max)
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (p - q).norm())
+        .fold(0.0, f64::max)
 }
 
 fn last_boundary() -> PolyData {
@@ -96,7 +99,12 @@ fn the_template_comes_out_at_the_fits_last_boundary_and_goes_back() {
 fn meshes_of_other_formats_are_carried_both_ways() {
     let dir = tempfile::tempdir().unwrap();
     let (obj, back) = (dir.path().join("moved.obj"), dir.path().join("back.obj"));
-    apply(&[s(&example("target_boundary.vtk")), "--out", s(&obj), "--inverse"]);
+    apply(&[
+        s(&example("target_boundary.vtk")),
+        "--out",
+        s(&obj),
+        "--inverse",
+    ]);
     apply(&[s(&obj), "--out", s(&back)]);
     let (a, b) = (
         medial_io::mesh::read_mesh(&back).unwrap(),
@@ -154,7 +162,11 @@ fn grid_points(grid: &Volume, path: &Path) -> Vec<Vec3> {
     let [nx, ny, nz] = grid.dims();
     let points: Vec<Vec3> = (0..nz)
         .step_by(3)
-        .flat_map(|k| (0..ny).step_by(3).flat_map(move |j| (0..nx).step_by(3).map(move |i| [i, j, k])))
+        .flat_map(|k| {
+            (0..ny)
+                .step_by(3)
+                .flat_map(move |j| (0..nx).step_by(3).map(move |i| [i, j, k]))
+        })
         .map(|index| grid.voxel_centre(index))
         .collect();
     let data = PolyData {
@@ -171,7 +183,10 @@ fn a_label_image_is_pulled_back_and_its_warp_matches_the_point_map_both_ways() {
     let dir = tempfile::tempdir().unwrap();
     let labels = label_image(dir.path());
     let target = example("target.nii.gz");
-    let (out, warp) = (dir.path().join("moved.nii.gz"), dir.path().join("warp.nii.gz"));
+    let (out, warp) = (
+        dir.path().join("moved.nii.gz"),
+        dir.path().join("warp.nii.gz"),
+    );
     let summary = apply(&[
         s(&labels),
         "--out",
@@ -185,7 +200,11 @@ fn a_label_image_is_pulled_back_and_its_warp_matches_the_point_map_both_ways() {
     assert_eq!(summary["labels"], true);
     let moved = read_nifti_file(&out).unwrap();
     assert!(moved.labels && moved.datatype == NiftiType::U8);
-    assert!(moved.volume.data().iter().all(|&v| [0.0, 1.0, 2.0].contains(&v)));
+    assert!(moved
+        .volume
+        .data()
+        .iter()
+        .all(|&v| [0.0, 1.0, 2.0].contains(&v)));
     assert!(moved.volume.data().contains(&2.0));
     let target_mask = read_nifti(&target).unwrap();
     assert_eq!(moved.volume.dims(), target_mask.dims());
@@ -296,7 +315,10 @@ fn the_atom_table_agrees_with_the_medial_vtk() {
     let files: Vec<&str> = (summary["files"].as_array().unwrap().iter())
         .map(|v| v.as_str().unwrap())
         .collect();
-    assert!(files.contains(&"atoms.csv") && files.contains(&"atoms.npy"), "{files:?}");
+    assert!(
+        files.contains(&"atoms.csv") && files.contains(&"atoms.npy"),
+        "{files:?}"
+    );
 }
 
 /// A copy of the fit folder's files (not its sub-folders) in `dir`.
@@ -325,7 +347,11 @@ fn what_is_not_a_complete_fit_or_does_not_fit_is_refused_in_one_line() {
         let a: Vec<&str> = a.iter().map(String::as_str).collect();
         one_line_error(&a, code, needles)
     };
-    run(dir.path(), 1, &["not a complete fit folder", "summary.json"]);
+    run(
+        dir.path(),
+        1,
+        &["not a complete fit folder", "summary.json"],
+    );
     let copy = copy_fit(dir.path());
     std::fs::write(copy.join("summary.json"), "{\"status\": \"conv").unwrap();
     run(&copy, 1, &["not a complete fit folder", "malformed"]);
@@ -340,7 +366,15 @@ fn what_is_not_a_complete_fit_or_does_not_fit_is_refused_in_one_line() {
     let fit = fit_dir();
     let image = example("target.nii.gz");
     one_line_error(
-        &["apply", s(fit), s(&input), "--out", s(&out), "--warp", "w.nii.gz"],
+        &[
+            "apply",
+            s(fit),
+            s(&input),
+            "--out",
+            s(&out),
+            "--warp",
+            "w.nii.gz",
+        ],
         2,
         &["--like"],
     );

@@ -93,8 +93,7 @@ pub fn read_warp(path: &Path) -> Result<Warp> {
             .iter()
             .map(|v| LPS[c] * v)
             .collect();
-        Volume::new(decoded.dims, values, decoded.voxel_to_world)
-            .map_err(|e| Error::model(path, e))
+        Volume::new(decoded.dims, values, decoded.voxel_to_world).map_err(|e| Error::model(path, e))
     };
     Ok(Warp {
         components: [component(0)?, component(1)?, component(2)?],

@@ -56,7 +56,13 @@ impl AmbientFlow {
             });
         }
         let steps = (0..flow.time_steps())
-            .map(|n| Sources::new(flow.kernel(), trajectory.positions(n), flow.step_controls(u, n)))
+            .map(|n| {
+                Sources::new(
+                    flow.kernel(),
+                    trajectory.positions(n),
+                    flow.step_controls(u, n),
+                )
+            })
             .collect();
         Ok(Self {
             dt: flow.dt(),
@@ -97,6 +103,7 @@ fn finite(x: &Vec3, what: &str) -> Result<()> {
 struct Forward<'a>(&'a AmbientFlow);
 
 impl PointMap for Forward<'_> {
+    #[inline(always)]
     fn map<V: F64Lanes>(&self, x: &Vec3) -> Result<Vec3> {
         finite(x, "the point")?;
         let flow = self.0;
@@ -113,6 +120,7 @@ impl PointMap for Forward<'_> {
 struct Inverse<'a>(&'a AmbientFlow);
 
 impl PointMap for Inverse<'_> {
+    #[inline(always)]
     fn map<V: F64Lanes>(&self, y: &Vec3) -> Result<Vec3> {
         finite(y, "the point")?;
         let flow = self.0;

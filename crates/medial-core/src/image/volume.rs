@@ -463,9 +463,18 @@ mod tests {
         let v = random_volume([4, 3, 5], 9);
         let m = *v.voxel_to_world();
         let at = |i: f64, j: f64, k: f64| (m * Vector4::new(i, j, k, 1.0)).xyz();
-        assert_eq!(v.sample_nearest(&at(2.0, 1.0, 3.0)), v.data()[2 + 4 * (1 + 3 * 3)]);
-        assert_eq!(v.sample_nearest(&at(2.4, 0.6, 2.6)), v.data()[2 + 4 * (1 + 3 * 3)]);
-        assert_eq!(v.sample_nearest(&at(-0.4, 2.4, 4.4)), v.data()[4 * (2 + 3 * 4)]);
+        assert_eq!(
+            v.sample_nearest(&at(2.0, 1.0, 3.0)),
+            v.data()[2 + 4 * (1 + 3 * 3)]
+        );
+        assert_eq!(
+            v.sample_nearest(&at(2.4, 0.6, 2.6)),
+            v.data()[2 + 4 * (1 + 3 * 3)]
+        );
+        assert_eq!(
+            v.sample_nearest(&at(-0.4, 2.4, 4.4)),
+            v.data()[4 * (2 + 3 * 4)]
+        );
         assert_eq!(v.sample_nearest(&at(-0.6, 0.0, 0.0)), 0.0);
         assert_eq!(v.sample_nearest(&at(0.0, 0.0, 4.6)), 0.0);
         assert!(v.sample_nearest(&Vec3::new(f64::NAN, 0.0, 0.0)).is_nan());

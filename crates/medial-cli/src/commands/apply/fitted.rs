@@ -14,6 +14,9 @@ use std::path::{Path, PathBuf};
 /// fit's `fitted_template.vtk` for which the template is taken as the one the fit ran from.
 const SAME_FIT_MM: f64 = 1e-6;
 
+/// An affine map and its inverse.
+type AffinePair = (Matrix4<f64>, Matrix4<f64>);
+
 /// What `apply` reads of `summary.json`.
 #[derive(Deserialize)]
 struct Listed {
@@ -27,7 +30,7 @@ struct Listed {
 /// `aligned_template.vtk`) or the identity.
 pub struct FittedMap {
     /// `A` and `A⁻¹`.
-    alignment: Option<(Matrix4<f64>, Matrix4<f64>)>,
+    alignment: Option<AffinePair>,
     flow: AmbientFlow,
 }
 
@@ -62,7 +65,9 @@ impl FittedMap {
     /// `F(x)` (without `inverse`) or `F⁻¹(y)` of every point.
     pub fn carry(&self, points: &[Vec3], inverse: bool) -> Result<Vec<Vec3>, CliError> {
         let by = |m: &Matrix4<f64>, p: &[Vec3]| -> Vec<Vec3> {
-            p.iter().map(|x| m.transform_point(&(*x).into()).coords).collect()
+            p.iter()
+                .map(|x| m.transform_point(&(*x).into()).coords)
+                .collect()
         };
         Ok(match (&self.alignment, inverse) {
             (None, false) => self.flow.forward(points)?,
@@ -139,20 +144,17 @@ fn check_same_fit(dir: &Path, template: &Path, end: &[Vec3]) -> Result<(), CliEr
 }
 
 /// `A` and `A⁻¹` of `dir/alignment.txt` when the fit's template is `dir/aligned_template.vtk`.
-fn alignment(
-    dir: &Path,
-    template: &Path,
-) -> Result<Option<(Matrix4<f64>, Matrix4<f64>)>, CliError> {
-    let aligned = std::path::absolute(dir.join("aligned_template.vtk"))
-        .map_err(|e| CliError::io(dir, e))?;
+fn alignment(dir: &Path, template: &Path) -> Result<Option<AffinePair>, CliError> {
+    let aligned =
+        std::path::absolute(dir.join("aligned_template.vtk")).map_err(|e| CliError::io(dir, e))?;
     let path: PathBuf = dir.join("alignment.txt");
     if !(same_file(&aligned, template) && path.is_file()) {
         return Ok(None);
     }
     let a = medial_io::affine::read_affine(&path)?.to_homogeneous();
-    let inverse = a.try_inverse().ok_or_else(|| {
-        CliError::Input(format!("{}: the alignment is singular", path.display()))
-    })?;
+    let inverse = a
+        .try_inverse()
+        .ok_or_else(|| CliError::Input(format!("{}: the alignment is singular", path.display())))?;
     Ok(Some((a, inverse)))
 }
 

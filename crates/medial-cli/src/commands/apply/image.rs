@@ -32,7 +32,8 @@ impl PullBack {
     /// The pull-back on `grid` of carrying by `map` (by its inverse with `inverse`).
     pub fn on(grid: &Volume, map: &FittedMap, inverse: bool) -> Result<Self, CliError> {
         let [nx, ny, nz] = grid.dims();
-        Estimate::pull_back(nx * ny * nz).check(|| format!("a pull-back on {nx}×{ny}×{nz} voxels"))?;
+        Estimate::pull_back(nx * ny * nz)
+            .check(|| format!("a pull-back on {nx}×{ny}×{nz} voxels"))?;
         let centres: Vec<Vec3> = (0..nz)
             .flat_map(|k| (0..ny).flat_map(move |j| (0..nx).map(move |i| [i, j, k])))
             .map(|index| grid.voxel_centre(index))

@@ -43,7 +43,10 @@ impl Sources {
         }
         for (j, (qj, uj)) in q.iter().zip(u.chunks_exact(3)).enumerate() {
             let base = chunked(j, FIELDS);
-            for (f, x) in [qj.x, qj.y, qj.z, uj[0], uj[1], uj[2]].into_iter().enumerate() {
+            for (f, x) in [qj.x, qj.y, qj.z, uj[0], uj[1], uj[2]]
+                .into_iter()
+                .enumerate()
+            {
                 points[base + LANES * f] = x;
             }
         }
@@ -59,7 +62,11 @@ impl Sources {
         let xs = [V::splat(x.x), V::splat(x.y), V::splat(x.z)];
         let mut sums = [V::splat(0.0); 3];
         for chunk in self.points.chunks_exact(LANES * FIELDS) {
-            let d: [V; 3] = std::array::from_fn(|c| xs[c] - V::load(&chunk[LANES * c..]));
+            let d = [
+                xs[0] - V::load(chunk),
+                xs[1] - V::load(&chunk[LANES..]),
+                xs[2] - V::load(&chunk[2 * LANES..]),
+            ];
             let r2 = d[2].mul_add(d[2], d[1].mul_add(d[1], d[0] * d[0]));
             let kernel = exp_neg_scaled(r2, self.scale);
             for (c, sum) in sums.iter_mut().enumerate() {
@@ -72,7 +79,8 @@ impl Sources {
 
 /// A map of points of space computed with kernel sums on the lanes `V` ([`Sources::velocity`]).
 pub(crate) trait PointMap: Sync {
-    /// The image of `x`, or why there is none.
+    /// The image of `x`, or why there is none. Implementations are `#[inline(always)]`, so
+    /// that they are compiled with the instructions of the lanes `V`.
     fn map<V: F64Lanes>(&self, x: &Vec3) -> Result<Vec3>;
 }
 
@@ -146,6 +154,7 @@ mod tests {
     struct Velocity(Sources);
 
     impl PointMap for Velocity {
+        #[inline(always)]
         fn map<V: F64Lanes>(&self, x: &Vec3) -> Result<Vec3> {
             Ok(self.0.velocity::<V>(x))
         }
@@ -162,7 +171,10 @@ mod tests {
         let sigma = 1.3;
         let kernel = GaussianKernel::new(sigma).unwrap();
         let (q, x) = (random(1, 37, 3.0), random(2, 150, 4.0));
-        let u: Vec<f64> = random(3, 37, 1.0).iter().flat_map(|v| [v.x, v.y, v.z]).collect();
+        let u: Vec<f64> = random(3, 37, 1.0)
+            .iter()
+            .flat_map(|v| [v.x, v.y, v.z])
+            .collect();
         let velocity = Velocity(Sources::new(&kernel, &q, &u));
         for isa in [Isa::Portable, Isa::best()] {
             let v = map_points_with(&velocity, &x, isa).unwrap();
@@ -184,10 +196,16 @@ mod tests {
     fn velocities_are_the_same_bits_whatever_the_thread_count() {
         let kernel = GaussianKernel::new(0.8).unwrap();
         let q = random(4, 301, 3.0);
-        let u: Vec<f64> = random(5, 301, 1.0).iter().flat_map(|v| [v.x, v.y, v.z]).collect();
+        let u: Vec<f64> = random(5, 301, 1.0)
+            .iter()
+            .flat_map(|v| [v.x, v.y, v.z])
+            .collect();
         let (velocity, x) = (Velocity(Sources::new(&kernel, &q, &u)), random(6, 999, 4.0));
         let with_threads = |n| {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build()
+                .unwrap();
             pool.install(|| map_points(&velocity, &x).unwrap())
         };
         let one = with_threads(1);
