@@ -43,7 +43,7 @@ pub struct Chart {
 
 impl Chart {
     /// The chart of `points` (see the type's documentation): the least-squares sphere
-    /// `|p|² = 2 c·p + k` unless its radius passes [`FLAT_RADIUS`] diagonals of the points or
+    /// `|p|² = 2 c·p + k` unless its radius passes `FLAT_RADIUS` diagonals of the points or
     /// the fit is singular, else the principal plane.
     ///
     /// Errors: `InvalidParameter` for fewer than three points or points on a line.

@@ -54,7 +54,7 @@ pub struct ShapeSheet {
     pub sheet: MedialSheet,
     /// The medial points found (after dropping islands).
     pub medial_points: Vec<MedialPoint>,
-    /// How many of them were kept as not on spurs ([`disc::ChartedCloud::new`]).
+    /// How many of them were kept as not on spurs (`ChartedCloud::new`).
     pub spur_free_points: usize,
     /// The chart the sheet was sampled in.
     pub chart: Chart,
@@ -65,7 +65,7 @@ pub struct ShapeSheet {
 /// The medial sheet of the shape `mask` (voxels > ½ inside, on a grid with orthogonal axes and
 /// a background border), sampled as `sampling` says (see the module documentation).
 ///
-/// Errors: those of [`medial_points`], [`Chart::fit`] and [`disc::disc_sheet`] (a shape that
+/// Errors: those of [`medial_points`], [`Chart::fit`] and `disc_sheet` (a shape that
 /// is not one disc- or bowl-shaped sheet), `InvalidParameter` for a non-positive sampling.
 pub fn sheet_of_mask(mask: &Volume, sampling: Sampling) -> Result<ShapeSheet> {
     let points = medial_points(mask, MIN_FEATURE_ANGLE_DEG)?;

@@ -15,7 +15,7 @@
 //! for the polynomial, 1 multiplication by `2^k`; plus a minimum and 2 integer operations),
 //! then the terms: 12 for the flow's velocity (6 multiply-adds), 36 for its adjoint (2 dot
 //! products 11, `K s` 1, 12 multiply-adds 24). So 53 flops per pair and step forward and 77
-//! backward, in 31 and 44 SIMD floating-point instructions per [`LANES`] pairs.
+//! backward, in 31 and 44 SIMD floating-point instructions per `LANES` pairs.
 
 mod field;
 mod lanes;
