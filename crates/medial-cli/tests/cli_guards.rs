@@ -68,16 +68,21 @@ fn a_huge_data_weight_or_a_tiny_kernel_stops_as_unsound_with_the_last_sound_resu
             "name = \"dice\"\nattachment = \"dice\"\nweight = 1e12",
         )
     });
-    // The data term swamps the constraints. Since the Dice term counts folded prisms against
-    // the fit (Σ|vol| in its denominator) the model no longer folds for it: the fit ends far
-    // from medial, and says so with exit code 4 rather than reporting a success.
+    // The data term swamps the constraints: the fit ends far from medial (exit code 4) or, when
+    // an iterate folds on the way (the Dice term counts folded prisms against the fit, but a
+    // step of L-BFGS can still reach one), unsound (exit code 3) — never reported a success.
+    // Which of the two depends on the last bits of the kernel sums.
     let out = dir.path().join("heavy");
     let o = medial(&["fit", s(&heavy), "--out", s(&out), "-q"]);
     let err = text(&o.stderr);
-    assert_eq!(o.status.code(), Some(4), "{err}");
-    assert!(err.contains("the medial constraints are not met"), "{err}");
+    let (message, status) = match o.status.code() {
+        Some(4) => ("the medial constraints are not met", "constraints_not_met"),
+        Some(3) => ("the model folds", "unsound"),
+        code => panic!("exit code {code:?}: {err}"),
+    };
+    assert!(err.contains(message), "{err}");
     let s1 = read_summary(&out);
-    assert_eq!(s1["status"], "constraints_not_met");
+    assert_eq!(s1["status"], status);
     println!("weight 1e12: {}", s1["final"]);
     let tiny = example_config(dir.path(), "toy", |t| {
         t.replace("sigma = 2.0 ", "sigma = 0.01 ")
