@@ -704,3 +704,62 @@ fn images_that_are_not_volumes_are_refused() {
     let v = read_nifti(&one.write(d, "one.nii", &[7])).unwrap();
     assert_eq!((v.dims(), v.data()), ([1, 1, 1], &[7.0][..]));
 }
+
+/// `v = (i − 5.3)/2` along the first axis of an oblique 12×5×4 grid: a signed level set whose
+/// zero crossing lies between voxel centres.
+fn ramp() -> Volume {
+    let dims = [12, 5, 4];
+    let data = (0..240).map(|n| ((n % 12) as f64 - 5.3) / 2.0).collect();
+    Volume::new(dims, data, oblique(false)).unwrap()
+}
+
+#[test]
+fn a_refined_signed_image_follows_its_zero_crossing_between_voxel_centres() {
+    let coarse = ramp();
+    assert!(coarse.is_graded_signed());
+    let fine = coarse.refined(3, 1).unwrap();
+    // Positive voxels i = 6 … 11, one voxel of margin: i = 5 … 11; all of j and k.
+    assert_eq!(fine.dims(), [21, 15, 12]);
+    assert_eq!(coarse.refined_dims(3, 1), fine.dims());
+    let [nx, ny, _] = fine.dims();
+    for (n, &v) in fine.data().iter().enumerate() {
+        let index = [n % nx, (n / nx) % ny, n / (nx * ny)];
+        // The fine centre in coarse indices: lo + (j − 1)/3 along each axis.
+        let [i, j, k] = index.map(|i| i as f64);
+        let at = coarse.world_to_voxel() * world(&fine, i, j, k).push(1.0);
+        let expected = [5.0, 0.0, 0.0]
+            .iter()
+            .zip(index)
+            .map(|(lo, j)| lo + (j as f64 - 1.0) / 3.0);
+        for (a, e) in at.iter().zip(expected) {
+            assert!((a - e).abs() < 1e-9, "fine voxel {index:?}: {a} vs {e}");
+        }
+        // Inside the grid the interpolant of a linear ramp is the ramp.
+        if (0.0..=4.0).contains(&at.y) && (0.0..=3.0).contains(&at.z) && at.x <= 11.0 {
+            assert!((v - (at.x - 5.3) / 2.0).abs() < 1e-12, "{index:?}: {v}");
+        }
+    }
+    // The foreground's extent along the ramp: the staircase at 6 voxels becomes the crossing
+    // at 5.3 to within a third of a voxel.
+    let inside = |v: &Volume| v.data().iter().filter(|&&v| v > 0.0).count();
+    assert_eq!(inside(&coarse), 6 * 5 * 4);
+    let fine_extent = inside(&fine) as f64 / (27 * 5 * 4) as f64;
+    assert!(
+        (fine_extent - (11.5 - 5.3)).abs() <= 1.0 / 3.0,
+        "{fine_extent}"
+    );
+}
+
+#[test]
+fn only_graded_signed_images_are_refined_meaningfully() {
+    let binary = volume(|n| (n % 2) as f64, oblique(false));
+    let two_signs = volume(|n| if n % 2 == 0 { -1.0 } else { 1.0 }, oblique(false));
+    let positive = volume(|n| n as f64 * 0.1, oblique(false));
+    for v in [&binary, &two_signs, &positive] {
+        assert!(!v.is_graded_signed());
+    }
+    assert!(ramp().is_graded_signed());
+    assert!(ramp().refined(0, 1).is_err());
+    let empty = volume(|_| -1.0, oblique(false));
+    assert_eq!(empty.refined(3, 1).unwrap(), empty);
+}

@@ -193,6 +193,11 @@ pub struct StageConfig {
     /// Dice: Gaussian smoothing of the image, mm.
     #[serde(default = "defaults::image_sigma")]
     pub image_sigma: f64,
+    /// Dice: split every voxel `image_refine³` times, the image interpolated trilinearly,
+    /// before taking its foreground (1: off). For graded signed images (a level set whose
+    /// foreground is `v > 0`): the boundary follows the zero crossing between voxel centres.
+    #[serde(default = "defaults::image_refine")]
+    pub image_refine: usize,
     /// Dice: midpoint subdivisions of the boundary.
     #[serde(default = "defaults::subdivision")]
     pub subdivision: usize,
@@ -223,12 +228,23 @@ pub struct StageConfig {
     /// L-BFGS iterations per AL iteration.
     #[serde(default = "defaults::max_iterations")]
     pub max_iterations: usize,
+    /// L-BFGS iterations of the first AL iteration (default: `max_iterations`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub first_iterations: Option<usize>,
     /// Stop when ‖∇E‖ falls below this fraction of its initial value.
     #[serde(default = "defaults::gradient_tolerance")]
     pub gradient_tolerance: f64,
     /// Stop when an iteration decreases E by less than this fraction.
     #[serde(default = "defaults::relative_decrease")]
     pub relative_decrease: f64,
+    /// Stop an AL iteration's L-BFGS when the last `progress_window` iterations decreased E
+    /// by less than `progress_decrease` of it, iterations (0: off; `max_iterations` still
+    /// caps it).
+    #[serde(default)]
+    pub progress_window: usize,
+    /// The least relative decrease of E over `progress_window` iterations that goes on.
+    #[serde(default = "defaults::progress_decrease")]
+    pub progress_decrease: f64,
     /// L-BFGS memory (correction pairs).
     #[serde(default = "defaults::lbfgs_memory")]
     pub lbfgs_memory: usize,
@@ -242,9 +258,15 @@ pub struct StageConfig {
     pub tolerance_pct: f64,
 }
 
+/// Largest `image_refine`: each voxel becomes `image_refine³`.
+const MAX_IMAGE_REFINE: usize = 8;
+
 mod defaults {
     pub fn image_sigma() -> f64 {
         0.2
+    }
+    pub fn image_refine() -> usize {
+        1
     }
     pub fn subdivision() -> usize {
         2
@@ -272,6 +294,9 @@ mod defaults {
     }
     pub fn relative_decrease() -> f64 {
         1e-9
+    }
+    pub fn progress_decrease() -> f64 {
+        0.01
     }
     pub fn lbfgs_memory() -> usize {
         10
@@ -302,6 +327,7 @@ impl StageConfig {
             label: None,
             weight: None,
             image_sigma: defaults::image_sigma(),
+            image_refine: defaults::image_refine(),
             subdivision: defaults::subdivision(),
             layers: defaults::layers(),
             constraints: None,
@@ -312,8 +338,11 @@ impl StageConfig {
             constraint_units: ConstraintUnitsConfig::default(),
             al_iterations: defaults::al_iterations(),
             max_iterations: defaults::max_iterations(),
+            first_iterations: None,
             gradient_tolerance: defaults::gradient_tolerance(),
             relative_decrease: defaults::relative_decrease(),
+            progress_window: 0,
+            progress_decrease: defaults::progress_decrease(),
             lbfgs_memory: defaults::lbfgs_memory(),
             tolerance_deg: defaults::tolerance_deg(),
             tolerance_pct: defaults::tolerance_pct(),
@@ -463,6 +492,18 @@ impl StageConfig {
                 if self.layers == 0 {
                     return Err("layers must be at least 1".into());
                 }
+                if !(1..=MAX_IMAGE_REFINE).contains(&self.image_refine) {
+                    return Err(format!(
+                        "image_refine must be 1 … {MAX_IMAGE_REFINE}, got {}",
+                        self.image_refine
+                    ));
+                }
+                if self.image_refine > 1 && self.label.is_some() {
+                    return Err(
+                        "image_refine interpolates intensities: it does not apply to a label"
+                            .into(),
+                    );
+                }
             }
             AttachmentKind::Varifold => {
                 if self.surface.is_none() {
@@ -490,7 +531,8 @@ impl StageConfig {
         positive("tolerance_deg", self.tolerance_deg)?;
         positive("tolerance_pct", self.tolerance_pct)?;
         non_negative("gradient_tolerance", self.gradient_tolerance)?;
-        non_negative("relative_decrease", self.relative_decrease)
+        non_negative("relative_decrease", self.relative_decrease)?;
+        non_negative("progress_decrease", self.progress_decrease)
     }
 }
 
@@ -596,5 +638,24 @@ target = "s.vtk"
             .check()
             .unwrap_err()
             .contains("mu"));
+    }
+
+    #[test]
+    fn image_refinement_needs_a_dice_stage_without_a_label() {
+        let dice = MINIMAL.replace("\"ssd\"\ntarget = \"s.vtk\"", "\"dice\"\nimage = \"i.nii\"");
+        let check = |extra: &str| {
+            let text = format!("{dice}{extra}\n");
+            toml::from_str::<Config>(&text).unwrap().check()
+        };
+        check("image_refine = 3").unwrap();
+        for (extra, named) in [
+            ("image_refine = 0", "image_refine must be 1"),
+            ("image_refine = 9", "image_refine must be 1"),
+            ("image_refine = 3\nlabel = 2", "does not apply to a label"),
+            ("progress_decrease = -1", "progress_decrease"),
+        ] {
+            let e = check(extra).unwrap_err();
+            assert!(e.contains(named), "{extra}: {e}");
+        }
     }
 }

@@ -18,6 +18,12 @@ use std::path::PathBuf;
 /// The image smoothing of an automatic Dice stage, per mm of the smallest voxel size.
 pub const IMAGE_SIGMA_PER_VOXEL: f64 = 0.4;
 
+/// The refinement of a graded signed image in an automatic Dice stage (`image_refine`): the
+/// boundary follows the zero crossing to a third of a voxel. Measured on the anterior mitral
+/// leaflet (a level set in [−1, 1] at 0.8 mm voxels, a sheet one to three voxels thick): voxel
+/// Dice 0.936 → 0.952 on the image's own grid with the same schedule.
+pub const GRADED_IMAGE_REFINE: usize = 3;
+
 /// What an automatic fit matches.
 #[derive(Clone, Debug)]
 pub enum Target {
@@ -30,6 +36,10 @@ pub enum Target {
         label: Option<f64>,
         /// Smallest voxel size, mm.
         voxel_mm: f64,
+        /// Whether it is a graded signed image (a level set, foreground `v > 0`; see
+        /// [`medial_core::image::volume::Volume::is_graded_signed`]): refined by
+        /// [`GRADED_IMAGE_REFINE`] without a label.
+        graded_signed: bool,
     },
     /// Points in correspondence with the template's boundary points.
     Points(PathBuf),
@@ -104,11 +114,15 @@ impl FitPlan {
                 path,
                 label,
                 voxel_mm,
+                graded_signed,
             } => {
                 let mut dice = constrained("dice", AttachmentKind::Dice, a.dice);
                 dice.image = Some(path.clone());
                 dice.label = *label;
-                dice.image_sigma = IMAGE_SIGMA_PER_VOXEL * voxel_mm;
+                if *graded_signed && label.is_none() {
+                    dice.image_refine = GRADED_IMAGE_REFINE;
+                }
+                dice.image_sigma = IMAGE_SIGMA_PER_VOXEL * voxel_mm / dice.image_refine as f64;
                 vec![dice]
             }
             Target::Points(path) => {
@@ -159,6 +173,7 @@ impl FitPlan {
                 mu: 0.02,
                 al_iterations: DICE_AL_ITERATIONS,
                 max_iterations: self.dice_iterations,
+                first_iterations: None,
             },
         );
         dice.image = Some(image);
@@ -174,6 +189,7 @@ impl FitPlan {
                 mu: 20.0,
                 al_iterations: BOUNDARY_AL_ITERATIONS,
                 max_iterations: self.boundary_iterations,
+                first_iterations: None,
             },
         );
         boundary.target = Some(target);
@@ -211,6 +227,10 @@ struct Schedule {
     al_iterations: usize,
     /// L-BFGS iterations per AL iteration.
     max_iterations: usize,
+    /// L-BFGS iterations of the first AL iteration, and the progress rule's window
+    /// (`progress_window`, at its default decrease of 1 %): the first AL iteration goes on
+    /// while it makes progress, up to this budget (none: `max_iterations`, no rule).
+    first_iterations: Option<(usize, usize)>,
 }
 
 /// The automatic schedules of [`FitPlan::automatic`].
@@ -246,21 +266,25 @@ const AUTOMATIC: Automatic = Automatic {
         mu: 2.0,
         al_iterations: 5,
         max_iterations: 120,
+        first_iterations: Some((600, 40)),
     },
     points: Schedule {
         mu: 200.0,
         al_iterations: 3,
         max_iterations: 300,
+        first_iterations: None,
     },
     surface: Schedule {
         mu: 200.0,
         al_iterations: 3,
         max_iterations: 300,
+        first_iterations: None,
     },
     surface_fine: Schedule {
         mu: 2000.0,
         al_iterations: 2,
         max_iterations: 300,
+        first_iterations: None,
     },
 };
 
@@ -292,6 +316,10 @@ fn constrained(name: &str, attachment: AttachmentKind, schedule: Schedule) -> St
     stage.mu_factor = 10.0;
     stage.al_iterations = schedule.al_iterations;
     stage.max_iterations = schedule.max_iterations;
+    if let Some((first, window)) = schedule.first_iterations {
+        stage.first_iterations = Some(first);
+        stage.progress_window = window;
+    }
     stage
 }
 

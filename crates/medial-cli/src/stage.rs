@@ -15,7 +15,7 @@ use medial_core::attachment::varifold::{Kind, Varifold, VarifoldParams, DEFAULT_
 use medial_core::attachment::Attachment;
 use medial_core::fit::augmented_lagrangian::{AlSchedule, MuUpdate};
 use medial_core::fit::objective::Evaluation;
-use medial_core::fit::optimize::LbfgsOptions;
+use medial_core::fit::optimize::{LbfgsOptions, ProgressRule};
 use medial_core::flow::{Flow, FlowParams};
 use medial_core::image::rasterize::voxel_dice;
 use medial_core::image::volume::Volume;
@@ -152,12 +152,17 @@ pub fn prepare(stage: &StageConfig, model: &Model) -> Result<Prepared, CliError>
                 MuUpdateConfig::Always => MuUpdate::Always,
                 MuUpdateConfig::IfNotHalved => MuUpdate::IfNotHalved,
             },
+            first_iterations: stage.first_iterations,
         },
         lbfgs: LbfgsOptions {
             max_iterations: stage.max_iterations,
             memory: stage.lbfgs_memory,
             gradient_tolerance: stage.gradient_tolerance,
             relative_decrease: stage.relative_decrease,
+            progress: (stage.progress_window > 0).then_some(ProgressRule {
+                window: stage.progress_window,
+                decrease: stage.progress_decrease,
+            }),
         },
     })
 }
@@ -262,6 +267,12 @@ pub fn with_choices(config: &Config, prepared: &[Prepared]) -> Config {
     resolved
 }
 
+/// Voxels kept around the foreground when an image is refined: the reach of the smoothing
+/// (4 σ) and two voxels more.
+fn refine_margin(stage: &StageConfig, volume: &Volume) -> usize {
+    (4.0 * stage.image_sigma / volume.spacing().min()).ceil() as usize + 2
+}
+
 /// The Dice attachment of a stage (the image's foreground, smoothed, against the model) and the
 /// foreground itself. Refuses a stage past the memory limit ([`Estimate::dice`]) and an image
 /// whose foreground no sample of the template's interior sees.
@@ -277,18 +288,30 @@ fn dice(stage: &StageConfig, model: &Model) -> Result<(DiceAttachment, Volume), 
         .as_deref()
         .expect("checked by the config: dice has image");
     let volume = medial_io::volume::read_volume(path)?;
+    let margin = refine_margin(stage, &volume);
+    let refined_voxels: usize = match stage.image_refine {
+        1 => 0,
+        f => volume.refined_dims(f, margin).iter().product(),
+    };
     Estimate::dice(
         stage,
         template.boundary_triangles().len(),
         template.landmark_count(),
-        volume.data().len(),
+        volume.data().len() + refined_voxels,
     )
     .check(|| format!("stage '{}'", stage.name))?;
     let mask = volume.foreground(stage.label);
-    drop(volume); // Not needed past its mask: freed before the smoothing copies.
-    let image = mask
+    let fine = match stage.image_refine {
+        1 => None,
+        f => Some(volume.refined(f, margin)?.foreground(stage.label)),
+    };
+    drop(volume); // Not needed past its masks: freed before the smoothing copies.
+    let image = fine
+        .as_ref()
+        .unwrap_or(&mask)
         .smoothed(stage.image_sigma)
         .map_err(|e| CliError::Input(format!("stage '{}': image_sigma: {e}", stage.name)))?;
+    drop(fine);
     let medial_of: Vec<usize> = template
         .medial_index()
         .iter()

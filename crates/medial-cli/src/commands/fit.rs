@@ -142,12 +142,15 @@ fn target_and_alignment(
 ) -> Result<(Matrix4<f64>, Target), CliError> {
     match (&inputs.image, &inputs.target, &inputs.surface) {
         (Some(image), None, None) => {
-            let mask = medial_io::volume::read_volume(image)?.foreground(inputs.label);
+            let volume = medial_io::volume::read_volume(image)?;
+            let mask = volume.foreground(inputs.label);
             let target = Target::Image {
                 path: image.clone(),
                 label: inputs.label,
                 voxel_mm: mask.spacing().min(),
+                graded_signed: volume.is_graded_signed(),
             };
+            drop(volume);
             Ok((align_to_image(boundary, &mask, image)?, target))
         }
         (None, Some(points), None) => {

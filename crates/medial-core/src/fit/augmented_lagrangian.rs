@@ -41,6 +41,9 @@ pub struct AlSchedule {
     pub iterations: usize,
     /// When `μ` grows.
     pub mu_update: MuUpdate,
+    /// The L-BFGS budget of the first AL iteration, where the shape is matched under the
+    /// weakest penalty (none: [`LbfgsOptions::max_iterations`] like the others), iterations.
+    pub first_iterations: Option<usize>,
 }
 
 impl Default for AlSchedule {
@@ -51,6 +54,7 @@ impl Default for AlSchedule {
             mu_max: 1e6,
             iterations: 1,
             mu_update: MuUpdate::Always,
+            first_iterations: None,
         }
     }
 }
@@ -341,7 +345,14 @@ pub fn run_stage(
                 report: r,
             })
         };
-        let min = match minimize(&objective, minimizer_start, options, check, pause, report)? {
+        let options = match (al_iteration, schedule.first_iterations) {
+            (0, Some(max_iterations)) => LbfgsOptions {
+                max_iterations,
+                ..*options
+            },
+            _ => *options,
+        };
+        let min = match minimize(&objective, minimizer_start, &options, check, pause, report)? {
             Minimization::Done(min) => min,
             Minimization::Paused(m) => {
                 return Ok(StageRun::Paused(Box::new(at.paused(stage_start.get(), *m))))

@@ -21,5 +21,7 @@ pub use augmented_lagrangian::{
 };
 pub use guard::{Guard, Unsound};
 pub use objective::{ConstraintSet, Evaluation, Objective, Penalty};
-pub use optimize::{minimize, LbfgsOptions, Minimization, MinimizerCheckpoint, Start, StopReason};
+pub use optimize::{
+    minimize, LbfgsOptions, Minimization, MinimizerCheckpoint, ProgressRule, Start, StopReason,
+};
 pub use stages::{run_stages, run_stages_resumable, Checkpoint, FitEvent, FitRun, PlannedStage};

@@ -4,6 +4,8 @@
 //! Stopping rule, checked after every iteration, first that holds:
 //! - `‖∇E‖ ≤ gradient_tolerance · max(‖∇E(u₀)‖, 1e-300)` (relative gradient norm),
 //! - `E_{k−1} − E_k ≤ relative_decrease · max(|E_k|, |E_{k−1}|)` (stalled decrease),
+//! - with a [`ProgressRule`], `E_{k−W} − E_k ≤ decrease · max(|E_k|, |E_{k−W}|)` (too little
+//!   progress over the last `W` iterations: the budget follows the progress),
 //! - `max_iterations` iterations done,
 //! - the line search finds no decrease (the best point so far is kept),
 //! - an iterate is unsound ([`crate::fit::guard`]) and no shorter step towards it is sound.
@@ -28,6 +30,21 @@ pub struct LbfgsOptions {
     pub gradient_tolerance: f64,
     /// Stop when an iteration decreases the objective by less than this fraction of it.
     pub relative_decrease: f64,
+    /// Stop when the last iterations together decreased it too little (none: only the
+    /// other rules).
+    pub progress: Option<ProgressRule>,
+}
+
+/// The progress rule of [`LbfgsOptions`]: stop at iteration `k ≥ window` when
+/// `E_{k−window} − E_k ≤ decrease · max(|E_k|, |E_{k−window}|)`. With a generous
+/// `max_iterations` it gives each minimisation the iterations it makes progress with: a slow
+/// fit (a thin sheet) goes on, one that has settled stops.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProgressRule {
+    /// `W ≥ 1`, iterations.
+    pub window: usize,
+    /// The least relative decrease over `W` iterations that goes on.
+    pub decrease: f64,
 }
 
 impl Default for LbfgsOptions {
@@ -37,6 +54,7 @@ impl Default for LbfgsOptions {
             memory: 10,
             gradient_tolerance: 1e-6,
             relative_decrease: 1e-9,
+            progress: None,
         }
     }
 }
@@ -48,6 +66,8 @@ pub enum StopReason {
     GradientTolerance,
     /// The objective stopped decreasing.
     RelativeDecrease,
+    /// The objective decreased too little over the window of the [`ProgressRule`].
+    Progress,
     /// The iteration budget is spent.
     MaxIterations,
     /// The line search found no acceptable step; the message says why.
@@ -65,7 +85,7 @@ impl StopReason {
     pub fn converged(&self) -> bool {
         matches!(
             self,
-            StopReason::GradientTolerance | StopReason::RelativeDecrease
+            StopReason::GradientTolerance | StopReason::RelativeDecrease | StopReason::Progress
         )
     }
 }
@@ -75,6 +95,7 @@ impl std::fmt::Display for StopReason {
         match self {
             StopReason::GradientTolerance => write!(f, "gradient norm below tolerance"),
             StopReason::RelativeDecrease => write!(f, "relative decrease below tolerance"),
+            StopReason::Progress => write!(f, "too little progress over the last iterations"),
             StopReason::MaxIterations => write!(f, "maximum number of iterations"),
             StopReason::LineSearch(why) => write!(f, "line search stopped: {why}"),
             StopReason::Unsound(why) => write!(f, "unsound iterate: {why}"),
@@ -124,6 +145,22 @@ struct Sound {
     evaluation: Evaluation,
     gradient_norm: f64,
     iteration: usize,
+    /// `E` at every accepted iterate `0 ..= iteration` (the progress rule).
+    totals: Vec<f64>,
+}
+
+impl Sound {
+    /// Whether the [`ProgressRule`] holds at the current iterate.
+    fn stalled(&self, progress: Option<ProgressRule>) -> bool {
+        let Some(ProgressRule { window, decrease }) = progress else {
+            return false;
+        };
+        let Some(k) = self.iteration.checked_sub(window.max(1)) else {
+            return false;
+        };
+        let (past, now) = (self.totals[k], self.evaluation.total);
+        past - now <= decrease * past.abs().max(now.abs())
+    }
 }
 
 /// Where a minimisation starts.
@@ -346,6 +383,7 @@ fn fresh(
     });
     Ok(Ok(Run {
         sound: Sound {
+            totals: vec![evaluation.total],
             momenta,
             evaluation,
             gradient_norm: grad0,
@@ -452,6 +490,9 @@ fn lbfgs(
         if previous - total <= options.relative_decrease * scale {
             return Ok(SegmentEnd::Stop(StopReason::RelativeDecrease));
         }
+        if sound.stalled(options.progress) {
+            return Ok(SegmentEnd::Stop(StopReason::Progress));
+        }
         previous = total;
         if pause() {
             return Ok(SegmentEnd::Paused(Box::new(Segment {
@@ -507,6 +548,7 @@ fn accept(
         gradient_norm,
         momenta: u,
     });
+    sound.totals.push(evaluation.total);
     sound.evaluation = evaluation;
 }
 

@@ -205,7 +205,7 @@ mod tests {
     use super::*;
     use crate::attachment::ssd::Ssd;
     use crate::fit::guard::Guard;
-    use crate::fit::{ConstraintSet, StopReason};
+    use crate::fit::{ConstraintSet, ProgressRule, StopReason};
     use crate::flow::{Flow, FlowParams};
     use crate::model::MedialConstraints;
     use crate::testing::meshes::bipyramid;
@@ -274,9 +274,17 @@ mod tests {
                         mu: 1.0,
                         mu_factor: 10.0,
                         iterations: 3,
+                        first_iterations: Some(16),
                         ..AlSchedule::default()
                     },
-                    lbfgs,
+                    // The progress rule's history survives a pause too.
+                    lbfgs: LbfgsOptions {
+                        progress: Some(ProgressRule {
+                            window: 4,
+                            decrease: 1e-3,
+                        }),
+                        ..lbfgs
+                    },
                 },
             ]
         }
@@ -429,5 +437,69 @@ mod tests {
         longer.iter_mut().for_each(|p| p.stage.flow = &other);
         let result = run_stages_resumable(&longer, Some(*checkpoint), &|| false, |_| {});
         assert!(matches!(result, Err(Error::ShapeMismatch { .. })));
+    }
+
+    /// The constrained stage of the plan with its L-BFGS options and AL schedule changed, run
+    /// from the template, and the totals it reported per AL iteration.
+    fn constrained_run(
+        change: impl Fn(&mut LbfgsOptions, &mut AlSchedule),
+    ) -> (StageOutcome, Vec<Vec<f64>>) {
+        let case = Case::new();
+        let mut plan = case.plan();
+        let mut stage = plan.remove(1);
+        change(&mut stage.lbfgs, &mut stage.schedule);
+        let mut totals: Vec<Vec<f64>> = Vec::new();
+        let outcomes = run_stages(&[stage], |event| {
+            if let FitEvent::Iteration { progress, .. } = event {
+                if progress.report.iteration == 0 {
+                    totals.push(Vec::new());
+                }
+                totals
+                    .last_mut()
+                    .unwrap()
+                    .push(progress.report.evaluation.total);
+            }
+        })
+        .unwrap();
+        (outcomes.into_iter().next().unwrap(), totals)
+    }
+
+    #[test]
+    fn the_progress_rule_stops_when_a_window_decreased_too_little() {
+        let rule = ProgressRule {
+            window: 3,
+            decrease: 0.02,
+        };
+        let (outcome, totals) = constrained_run(|lbfgs, schedule| {
+            lbfgs.max_iterations = 500;
+            lbfgs.progress = Some(rule);
+            schedule.first_iterations = None;
+        });
+        assert!(
+            outcome.stops.contains(&StopReason::Progress),
+            "{:?}",
+            outcome.stops
+        );
+        for (stop, e) in outcome.stops.iter().zip(&totals) {
+            let k = e.len() - 1;
+            let held =
+                |k: usize| k >= 3 && e[k - 3] - e[k] <= 0.02 * e[k - 3].abs().max(e[k].abs());
+            assert!(k < 500, "the rule ends the minimisation before its budget");
+            assert!((3..k).all(|j| !held(j)), "it did not hold earlier");
+            assert_eq!(*stop == StopReason::Progress, held(k), "{stop:?} at {k}");
+        }
+    }
+
+    #[test]
+    fn the_first_al_iteration_has_its_own_budget() {
+        let (outcome, totals) = constrained_run(|lbfgs, schedule| {
+            lbfgs.relative_decrease = 0.0;
+            lbfgs.gradient_tolerance = 0.0;
+            lbfgs.progress = None;
+            schedule.first_iterations = Some(5);
+        });
+        let iterations: Vec<usize> = totals.iter().map(|e| e.len() - 1).collect();
+        assert_eq!(iterations, [5, 12, 12]);
+        assert_eq!(outcome.iterations, 29);
     }
 }
