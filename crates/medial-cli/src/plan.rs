@@ -327,6 +327,7 @@ const AUTOMATIC: Automatic = Automatic {
 ///   mitral leaflet 0.950, 0.73°, 0.19 %, 1,138 → 0.952, 0.28°, 0.20 %, 1,085;
 /// - points (mean distance): hard 0.184 → 0.156 mm, 0.38° → 0.02°; t001-bent 0.033 → 0.014 mm;
 ///   toy 0.204 → 0.192 mm in 467 evaluations instead of 1,002; the warps 0.014–0.093 → 0.007–0.071 mm.
+///
 /// At × 0.75 every case lay between the two.
 const SIGMA_FACTOR: f64 = 0.55;
 
