@@ -217,6 +217,17 @@ pub fn run(args: &TemplateArgs, threads: usize, quiet: bool) -> Result<(), CliEr
         (None, None) => Sampling::Atoms(DEFAULT_ATOMS),
     };
     let shape = Shape::read(args)?;
+    shape.bounds().map_err(|_| {
+        CliError::Input(match shape {
+            Shape::Mask(_) => format!(
+                "{}: the segmentation is empty (no voxel {})",
+                args.shape.display(),
+                args.label
+                    .map_or_else(|| "> 0".to_owned(), |l| format!("labelled {l}"))
+            ),
+            Shape::Mesh(_) => format!("{}: the mesh has no points", args.shape.display()),
+        })
+    })?;
     let (mask, voxel) = fine_mask(&shape, args)?;
     let found = sheet_of_mask(&mask, sampling).map_err(|e| model_error(&args.shape, e))?;
     if let Some(path) = &args.sheet {
