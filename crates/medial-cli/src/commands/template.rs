@@ -230,9 +230,6 @@ pub fn run(args: &TemplateArgs, threads: usize, quiet: bool) -> Result<(), CliEr
     })?;
     let (mask, voxel) = fine_mask(&shape, args)?;
     let found = sheet_of_mask(&mask, sampling).map_err(|e| model_error(&args.shape, e))?;
-    if let Some(path) = &args.sheet {
-        medial_io::sheet::write_sheet(path, &found.sheet, write_options(args.binary))?;
-    }
     let initial = inflated(&found.sheet, &args.shape)?;
     let dice_before_fit = dice_of(&initial, &mask, &args.shape)?;
     let fit_start = Instant::now();
@@ -245,7 +242,6 @@ pub fn run(args: &TemplateArgs, threads: usize, quiet: bool) -> Result<(), CliEr
     let projection =
         project(&fitted, &ProjectOptions::default()).map_err(|e| model_error(&args.shape, e))?;
     let template = projection.template;
-    medial_io::cmrep::write_template(&args.out, &template, write_options(args.binary))?;
     let figures = figures_of(
         &template,
         &found,
@@ -255,6 +251,12 @@ pub fn run(args: &TemplateArgs, threads: usize, quiet: bool) -> Result<(), CliEr
         args,
         [dice_before_fit, projection.max_displacement, fit_seconds],
     )?;
+    // Nothing is written before everything has been computed, so that a failure leaves no
+    // half-written output.
+    medial_io::cmrep::write_template(&args.out, &template, write_options(args.binary))?;
+    if let Some(path) = &args.sheet {
+        medial_io::sheet::write_sheet(path, &found.sheet, write_options(args.binary))?;
+    }
     let figures = TemplateFigures {
         seconds: start.elapsed().as_secs_f64(),
         ..figures
@@ -350,6 +352,13 @@ fn fit_to_shape(
     match fit::run(&config, &options) {
         // The final projection enforces the constraints the fit left above tolerance.
         Ok(_) | Err(CliError::ConstraintsNotMet(_)) => {}
+        // The fit stopped where the model would fold and wrote its last sound iterate: the
+        // template is that iterate (its figures say whether it meets the targets).
+        Err(CliError::Unsound(message)) => {
+            tracing::warn!(
+                "the fit to the shape stopped early, keeping its last sound iterate: {message}"
+            );
+        }
         Err(e) => return Err(e),
     }
     Ok(medial_io::cmrep::read_template(
