@@ -112,7 +112,8 @@ fn bad_input_gives_a_one_line_error() {
     let dir = tempfile::tempdir().unwrap();
     let mask = cup_mask(dir.path());
     let out = dir.path().join("t.vtk");
-    let out = s(&out);
+    let sheet = dir.path().join("t_sheet.vtk");
+    let (out, sheet) = (s(&out), s(&sheet));
 
     // An empty segmentation: every voxel 0.
     let image = read_nifti(&mask).unwrap();
@@ -124,7 +125,11 @@ fn bad_input_gives_a_one_line_error() {
     .unwrap();
     let empty = dir.path().join("empty.nii.gz");
     write_nifti(&empty, &empty_volume, NiftiType::U8).unwrap();
-    let line = one_line_error(&["template", s(&empty), "--out", out], 1, &["empty"]);
+    let line = one_line_error(
+        &["template", s(&empty), "--out", out, "--sheet", sheet],
+        1,
+        &["empty"],
+    );
     assert!(line.contains("empty.nii.gz"), "{line}");
     // A label no voxel has.
     one_line_error(
@@ -142,6 +147,55 @@ fn bad_input_gives_a_one_line_error() {
     let garbage = dir.path().join("garbage.nii.gz");
     std::fs::write(&garbage, "not an image").unwrap();
     one_line_error(&["template", s(&garbage), "--out", out], 1, &["garbage"]);
+    // Meshes: not a VTK file, a mesh without points, an open mesh, an unknown extension, a
+    // missing mesh.
+    let write = |name: &str, content: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, content).unwrap();
+        path
+    };
+    let header = "# vtk DataFile Version 3.0\nmesh\nASCII\nDATASET POLYDATA\n";
+    let not_vtk = write("not_vtk.vtk", "not a mesh");
+    one_line_error(
+        &["template", s(&not_vtk), "--out", out, "--sheet", sheet],
+        1,
+        &["not_vtk.vtk", "legacy VTK"],
+    );
+    let no_points = write(
+        "no_points.vtk",
+        &format!("{header}POINTS 0 float\nPOLYGONS 0 0\n"),
+    );
+    one_line_error(
+        &["template", s(&no_points), "--out", out, "--sheet", sheet],
+        1,
+        &["no_points.vtk", "no points"],
+    );
+    let open = write(
+        "open.vtk",
+        &format!("{header}POINTS 3 float\n0 0 0 1 0 0 0 1 0\nPOLYGONS 1 4\n3 0 1 2\n"),
+    );
+    one_line_error(
+        &["template", s(&open), "--out", out, "--sheet", sheet],
+        1,
+        &["open.vtk", "open"],
+    );
+    let text_file = write("shape.txt", "1 2 3");
+    one_line_error(
+        &["template", s(&text_file), "--out", out],
+        1,
+        &["shape.txt", "extension"],
+    );
+    one_line_error(
+        &["template", "no/such/mesh.vtk", "--out", out],
+        1,
+        &["no/such/mesh.vtk"],
+    );
+    // --label with a mesh.
+    one_line_error(
+        &["template", s(&open), "--out", out, "--label", "1"],
+        2,
+        &["--label"],
+    );
     // Wrong command lines (exit 2).
     // (clap prints its usage line after a conflict: exit 2, the error on the first line)
     let o = medial(&[
@@ -162,8 +216,10 @@ fn bad_input_gives_a_one_line_error() {
         2,
         &["--voxel"],
     );
-    // Nothing was written.
-    assert!(!Path::new(out).exists());
+    // Nothing was written: no template, no sheet, no figures.
+    for path in [out, sheet, s(&Path::new(out).with_extension("json"))] {
+        assert!(!Path::new(path).exists(), "{path} was written");
+    }
     let o = medial(&["template", s(&mask)]);
     assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
 }

@@ -94,8 +94,10 @@ pub struct TemplateArgs {
 
 /// The shape as read.
 enum Shape {
-    /// A binary mask on the input's grid (1 inside).
-    Mask(Box<Volume>),
+    /// A binary mask on the input's grid (1 inside), and the input itself when it is a graded
+    /// signed image without --label (a level set, foreground `v > 0`): the fine grid then
+    /// follows the zero crossing of its trilinear interpolant, not the whole voxels of the mask.
+    Mask(Box<Volume>, Option<Box<Volume>>),
     /// A closed triangle mesh (mm).
     Mesh(TriMesh),
 }
@@ -108,7 +110,9 @@ impl Shape {
             .any(|e| name.ends_with(e))
         {
             let image = medial_io::volume::read_volume(&args.shape)?;
-            Ok(Self::Mask(Box::new(image.foreground(args.label))))
+            let graded =
+                (args.label.is_none() && image.is_graded_signed()).then(|| Box::new(image.clone()));
+            Ok(Self::Mask(Box::new(image.foreground(args.label)), graded))
         } else if args.label.is_some() {
             Err(CliError::Usage("--label needs a segmentation".into()))
         } else {
@@ -120,7 +124,7 @@ impl Shape {
     /// [`COARSE_VOXELS`]th of a mesh's longest side.
     fn coarse_voxel(&self) -> Result<f64, CliError> {
         Ok(match self {
-            Self::Mask(mask) => mask.spacing().min() / 2.0,
+            Self::Mask(mask, _) => mask.spacing().min() / 2.0,
             Self::Mesh(_) => self.bounds()?.extent().max() / COARSE_VOXELS,
         })
     }
@@ -132,7 +136,7 @@ impl Shape {
         let margin = MARGIN_VOXELS * h;
         let (dims, to_world) = match self {
             Self::Mesh(mesh) => grid_around(mesh, h, margin),
-            Self::Mask(_) => grid_around_bounds(&self.bounds()?, h, margin),
+            Self::Mask(..) => grid_around_bounds(&self.bounds()?, h, margin),
         }
         .map_err(|e| model_error(path, e))?;
         let voxels: usize = dims.iter().product();
@@ -149,10 +153,16 @@ impl Shape {
         memory::check_grid(dims)?;
         let mask = match self {
             Self::Mesh(mesh) => rasterize(mesh, dims, to_world),
-            Self::Mask(mask) => mask.resampled(dims, to_world).and_then(|v| {
-                let data = v.data().iter().map(|&x| f64::from(u8::from(x > 0.5)));
-                Volume::new(dims, data.collect(), to_world)
-            }),
+            Self::Mask(mask, graded) => {
+                let (image, cut) = match graded {
+                    Some(graded) => (graded, 0.0),
+                    None => (mask, 0.5),
+                };
+                image.resampled(dims, to_world).and_then(|v| {
+                    let data = v.data().iter().map(|&x| f64::from(u8::from(x > cut)));
+                    Volume::new(dims, data.collect(), to_world)
+                })
+            }
         };
         mask.map_err(|e| model_error(path, e))
     }
@@ -160,7 +170,7 @@ impl Shape {
     /// The bounding box of the shape (the mask's foreground voxels, or the mesh's points).
     fn bounds(&self) -> Result<Bounds, CliError> {
         match self {
-            Self::Mask(mask) => mask.support_bounds(),
+            Self::Mask(mask, _) => mask.support_bounds(),
             Self::Mesh(mesh) => Bounds::of(mesh.points()),
         }
         .ok_or_else(|| CliError::Input("the shape is empty".into()))
@@ -219,7 +229,7 @@ pub fn run(args: &TemplateArgs, threads: usize, quiet: bool) -> Result<(), CliEr
     let shape = Shape::read(args)?;
     shape.bounds().map_err(|_| {
         CliError::Input(match shape {
-            Shape::Mask(_) => format!(
+            Shape::Mask(..) => format!(
                 "{}: the segmentation is empty (no voxel {})",
                 args.shape.display(),
                 args.label
@@ -386,7 +396,7 @@ fn figures_of(
     let boundary = boundary_mesh(template).map_err(|e| model_error(&args.out, e))?;
     let dice = voxel_dice(&boundary, mask).map_err(|e| model_error(&args.out, e))?;
     let dice_input_grid = match shape {
-        Shape::Mask(input) => {
+        Shape::Mask(input, _) => {
             Some(voxel_dice(&boundary, input).map_err(|e| model_error(&args.out, e))?)
         }
         Shape::Mesh(_) => None,
