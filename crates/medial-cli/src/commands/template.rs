@@ -53,7 +53,7 @@ const TARGET_DICE: f64 = 0.95;
 #[command(group(clap::ArgGroup::new("sampling").args(["spacing", "atoms"])))]
 pub struct TemplateArgs {
     /// The shape: a binary segmentation (.nii, .nii.gz, .exr; foreground = value > 0 or
-    /// --label) or a closed triangle mesh (.vtk, .obj, .gltf, .glb), world coordinates in mm.
+    /// --label; a graded signed image, a level set, is cut at 0 on the fine grid) or a closed triangle mesh (.vtk, .obj, .gltf, .glb), world coordinates in mm.
     /// One sheet shaped as a disc or a bowl (heart wall, placenta, leaflet).
     #[arg(value_name = "SHAPE")]
     pub shape: PathBuf,
