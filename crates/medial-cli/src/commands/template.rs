@@ -53,7 +53,7 @@ const TARGET_DICE: f64 = 0.95;
 #[command(group(clap::ArgGroup::new("sampling").args(["spacing", "atoms"])))]
 pub struct TemplateArgs {
     /// The shape: a binary segmentation (.nii, .nii.gz, .exr; foreground = value > 0 or
-    /// --label) or a closed triangle mesh (.vtk, .obj, .gltf, .glb), world coordinates in mm.
+    /// --label; a graded signed image, a level set, is cut at 0 on the fine grid) or a closed triangle mesh (.vtk, .obj, .gltf, .glb), world coordinates in mm.
     /// One sheet shaped as a disc or a bowl (heart wall, placenta, leaflet).
     #[arg(value_name = "SHAPE")]
     pub shape: PathBuf,
@@ -94,8 +94,10 @@ pub struct TemplateArgs {
 
 /// The shape as read.
 enum Shape {
-    /// A binary mask on the input's grid (1 inside).
-    Mask(Box<Volume>),
+    /// A binary mask on the input's grid (1 inside), and the input itself when it is a graded
+    /// signed image without --label (a level set, foreground `v > 0`): the fine grid then
+    /// follows the zero crossing of its trilinear interpolant, not the whole voxels of the mask.
+    Mask(Box<Volume>, Option<Box<Volume>>),
     /// A closed triangle mesh (mm).
     Mesh(TriMesh),
 }
@@ -108,7 +110,9 @@ impl Shape {
             .any(|e| name.ends_with(e))
         {
             let image = medial_io::volume::read_volume(&args.shape)?;
-            Ok(Self::Mask(Box::new(image.foreground(args.label))))
+            let graded =
+                (args.label.is_none() && image.is_graded_signed()).then(|| Box::new(image.clone()));
+            Ok(Self::Mask(Box::new(image.foreground(args.label)), graded))
         } else if args.label.is_some() {
             Err(CliError::Usage("--label needs a segmentation".into()))
         } else {
@@ -120,7 +124,7 @@ impl Shape {
     /// [`COARSE_VOXELS`]th of a mesh's longest side.
     fn coarse_voxel(&self) -> Result<f64, CliError> {
         Ok(match self {
-            Self::Mask(mask) => mask.spacing().min() / 2.0,
+            Self::Mask(mask, _) => mask.spacing().min() / 2.0,
             Self::Mesh(_) => self.bounds()?.extent().max() / COARSE_VOXELS,
         })
     }
@@ -132,7 +136,7 @@ impl Shape {
         let margin = MARGIN_VOXELS * h;
         let (dims, to_world) = match self {
             Self::Mesh(mesh) => grid_around(mesh, h, margin),
-            Self::Mask(_) => grid_around_bounds(&self.bounds()?, h, margin),
+            Self::Mask(..) => grid_around_bounds(&self.bounds()?, h, margin),
         }
         .map_err(|e| model_error(path, e))?;
         let voxels: usize = dims.iter().product();
@@ -149,10 +153,16 @@ impl Shape {
         memory::check_grid(dims)?;
         let mask = match self {
             Self::Mesh(mesh) => rasterize(mesh, dims, to_world),
-            Self::Mask(mask) => mask.resampled(dims, to_world).and_then(|v| {
-                let data = v.data().iter().map(|&x| f64::from(u8::from(x > 0.5)));
-                Volume::new(dims, data.collect(), to_world)
-            }),
+            Self::Mask(mask, graded) => {
+                let (image, cut) = match graded {
+                    Some(graded) => (graded, 0.0),
+                    None => (mask, 0.5),
+                };
+                image.resampled(dims, to_world).and_then(|v| {
+                    let data = v.data().iter().map(|&x| f64::from(u8::from(x > cut)));
+                    Volume::new(dims, data.collect(), to_world)
+                })
+            }
         };
         mask.map_err(|e| model_error(path, e))
     }
@@ -160,7 +170,7 @@ impl Shape {
     /// The bounding box of the shape (the mask's foreground voxels, or the mesh's points).
     fn bounds(&self) -> Result<Bounds, CliError> {
         match self {
-            Self::Mask(mask) => mask.support_bounds(),
+            Self::Mask(mask, _) => mask.support_bounds(),
             Self::Mesh(mesh) => Bounds::of(mesh.points()),
         }
         .ok_or_else(|| CliError::Input("the shape is empty".into()))
@@ -217,11 +227,19 @@ pub fn run(args: &TemplateArgs, threads: usize, quiet: bool) -> Result<(), CliEr
         (None, None) => Sampling::Atoms(DEFAULT_ATOMS),
     };
     let shape = Shape::read(args)?;
+    shape.bounds().map_err(|_| {
+        CliError::Input(match shape {
+            Shape::Mask(..) => format!(
+                "{}: the segmentation is empty (no voxel {})",
+                args.shape.display(),
+                args.label
+                    .map_or_else(|| "> 0".to_owned(), |l| format!("labelled {l}"))
+            ),
+            Shape::Mesh(_) => format!("{}: the mesh has no points", args.shape.display()),
+        })
+    })?;
     let (mask, voxel) = fine_mask(&shape, args)?;
     let found = sheet_of_mask(&mask, sampling).map_err(|e| model_error(&args.shape, e))?;
-    if let Some(path) = &args.sheet {
-        medial_io::sheet::write_sheet(path, &found.sheet, write_options(args.binary))?;
-    }
     let initial = inflated(&found.sheet, &args.shape)?;
     let dice_before_fit = dice_of(&initial, &mask, &args.shape)?;
     let fit_start = Instant::now();
@@ -234,7 +252,6 @@ pub fn run(args: &TemplateArgs, threads: usize, quiet: bool) -> Result<(), CliEr
     let projection =
         project(&fitted, &ProjectOptions::default()).map_err(|e| model_error(&args.shape, e))?;
     let template = projection.template;
-    medial_io::cmrep::write_template(&args.out, &template, write_options(args.binary))?;
     let figures = figures_of(
         &template,
         &found,
@@ -244,6 +261,12 @@ pub fn run(args: &TemplateArgs, threads: usize, quiet: bool) -> Result<(), CliEr
         args,
         [dice_before_fit, projection.max_displacement, fit_seconds],
     )?;
+    // Nothing is written before everything has been computed, so that a failure leaves no
+    // half-written output.
+    medial_io::cmrep::write_template(&args.out, &template, write_options(args.binary))?;
+    if let Some(path) = &args.sheet {
+        medial_io::sheet::write_sheet(path, &found.sheet, write_options(args.binary))?;
+    }
     let figures = TemplateFigures {
         seconds: start.elapsed().as_secs_f64(),
         ..figures
@@ -339,6 +362,13 @@ fn fit_to_shape(
     match fit::run(&config, &options) {
         // The final projection enforces the constraints the fit left above tolerance.
         Ok(_) | Err(CliError::ConstraintsNotMet(_)) => {}
+        // The fit stopped where the model would fold and wrote its last sound iterate: the
+        // template is that iterate (its figures say whether it meets the targets).
+        Err(CliError::Unsound(message)) => {
+            tracing::warn!(
+                "the fit to the shape stopped early, keeping its last sound iterate: {message}"
+            );
+        }
         Err(e) => return Err(e),
     }
     Ok(medial_io::cmrep::read_template(
@@ -366,7 +396,7 @@ fn figures_of(
     let boundary = boundary_mesh(template).map_err(|e| model_error(&args.out, e))?;
     let dice = voxel_dice(&boundary, mask).map_err(|e| model_error(&args.out, e))?;
     let dice_input_grid = match shape {
-        Shape::Mask(input) => {
+        Shape::Mask(input, _) => {
             Some(voxel_dice(&boundary, input).map_err(|e| model_error(&args.out, e))?)
         }
         Shape::Mesh(_) => None,

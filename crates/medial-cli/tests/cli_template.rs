@@ -1,0 +1,225 @@
+//! End-to-end tests of `medial template` through the built binary (issue 10): a template built
+//! from a synthetic cup's segmentation (`medial synth cup`, its template rasterized by
+//! `medial rasterize`) meets the targets in its JSON figures and in the file it writes, and bad
+//! input ends with a one-line error and a non-zero exit.
+
+mod common;
+
+use common::{f, medial, one_line_error, run_json, s, text};
+use medial_core::image::volume::Volume;
+use medial_core::mesh::topology::{check_closed_oriented_manifold, check_outward};
+use medial_core::model::SpokeMetrics;
+use medial_core::synth::boundary_mesh;
+use medial_io::nifti_volume::{read_nifti, write_nifti, NiftiType};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+/// The synthetic cup's template rasterized with 0.5 mm voxels, written into `dir`.
+fn cup_mask(dir: &Path) -> PathBuf {
+    let case = dir.join("case");
+    run_json(&["synth", "cup", "--out", s(&case), "-q"]);
+    let mask = dir.join("cup.nii.gz");
+    run_json(&[
+        "rasterize",
+        s(&case.join("template.vtk")),
+        "--spacing",
+        "0.5",
+        "--out",
+        s(&mask),
+        "-q",
+    ]);
+    mask
+}
+
+/// The figures' targets (issue 10) hold.
+fn assert_targets(figures: &Value) {
+    let dice = f(&figures["dice"]);
+    let angle = f(&figures["max_spoke_normal_deg"]);
+    let mismatch = f(&figures["max_spoke_mismatch_pct"]);
+    assert!(dice >= 0.95, "voxel Dice {dice}");
+    assert!(f(&figures["dice_input_grid"]) >= 0.95, "{figures}");
+    assert!(angle <= 0.1, "max spoke-normal {angle}°");
+    assert!(mismatch <= 0.1, "max spoke mismatch {mismatch} %");
+    for key in [
+        "closed_manifold",
+        "outward",
+        "self_intersection_free",
+        "meets_targets",
+    ] {
+        assert_eq!(figures[key], Value::Bool(true), "{key}: {figures}");
+    }
+}
+
+#[test]
+fn a_template_of_the_synthetic_cup_meets_the_targets() {
+    let dir = tempfile::tempdir().unwrap();
+    let mask = cup_mask(dir.path());
+    let out = dir.path().join("template.vtk");
+    let sheet = dir.path().join("sheet.vtk");
+    let figures = run_json(&[
+        "template",
+        s(&mask),
+        "--out",
+        s(&out),
+        "--sheet",
+        s(&sheet),
+        "--atoms",
+        "100",
+        "-q",
+    ]);
+    eprintln!("{figures:#}");
+    assert_targets(&figures);
+    assert!(f(&figures["dice_before_fit"]) < f(&figures["dice"]));
+    assert_eq!(figures["sheets"], 1);
+    assert_eq!(figures["seams"], 0);
+    assert_eq!(figures["atoms_by_spokes"][2], 0, "no seam atoms on a cup");
+    let atoms = figures["atoms"].as_u64().unwrap();
+    assert!((80..=200).contains(&atoms), "{atoms} atoms for --atoms 100");
+    let [thin, thick] = [0, 1].map(|i| f(&figures["thickness_mm"][i]));
+    // The cup's wall is 4–8 mm thick (crates/medial-core/src/synth).
+    assert!(
+        thin > 3.0 && thick < 9.0 && thin < thick,
+        "{thin}–{thick} mm"
+    );
+
+    // The figures are also written beside the template, and agree with what was printed.
+    let written: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.with_extension("json")).unwrap())
+            .unwrap();
+    assert_eq!(written["atoms"], figures["atoms"]);
+    assert_eq!(written["dice"], figures["dice"]);
+
+    // The template file, read back independently, is what the figures say.
+    let template = medial_io::cmrep::read_template(&out).expect("a cmrep template");
+    assert_eq!(template.medial_count() as u64, atoms);
+    let m = SpokeMetrics::compute(&template, template.landmarks());
+    assert!(
+        m.max_spoke_normal_deg <= 0.1 + 1e-9,
+        "{}",
+        m.max_spoke_normal_deg
+    );
+    assert!(100.0 * m.max_spoke_mismatch <= 0.1 + 1e-9);
+    let boundary = boundary_mesh(&template).unwrap();
+    check_closed_oriented_manifold(&boundary).expect("closed, manifold");
+    check_outward(&boundary).expect("outward");
+    // The sheet is written too, with its radius.
+    let sheet = medial_io::sheet::read_sheet(&sheet, "Radius").expect("a medial sheet");
+    assert!(sheet.radius().iter().all(|&r| r > 0.0));
+}
+
+#[test]
+fn bad_input_gives_a_one_line_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let mask = cup_mask(dir.path());
+    let out = dir.path().join("t.vtk");
+    let sheet = dir.path().join("t_sheet.vtk");
+    let (out, sheet) = (s(&out), s(&sheet));
+
+    // An empty segmentation: every voxel 0.
+    let image = read_nifti(&mask).unwrap();
+    let empty_volume = Volume::new(
+        image.dims(),
+        vec![0.0; image.data().len()],
+        *image.voxel_to_world(),
+    )
+    .unwrap();
+    let empty = dir.path().join("empty.nii.gz");
+    write_nifti(&empty, &empty_volume, NiftiType::U8).unwrap();
+    let line = one_line_error(
+        &["template", s(&empty), "--out", out, "--sheet", sheet],
+        1,
+        &["empty"],
+    );
+    assert!(line.contains("empty.nii.gz"), "{line}");
+    // A label no voxel has.
+    one_line_error(
+        &["template", s(&mask), "--out", out, "--label", "7"],
+        1,
+        &["empty", "labelled 7"],
+    );
+    // A missing file.
+    one_line_error(
+        &["template", "no/such/shape.nii.gz", "--out", out],
+        1,
+        &["no/such/shape.nii.gz"],
+    );
+    // Not a NIfTI file.
+    let garbage = dir.path().join("garbage.nii.gz");
+    std::fs::write(&garbage, "not an image").unwrap();
+    one_line_error(&["template", s(&garbage), "--out", out], 1, &["garbage"]);
+    // Meshes: not a VTK file, a mesh without points, an open mesh, an unknown extension, a
+    // missing mesh.
+    let write = |name: &str, content: &str| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, content).unwrap();
+        path
+    };
+    let header = "# vtk DataFile Version 3.0\nmesh\nASCII\nDATASET POLYDATA\n";
+    let not_vtk = write("not_vtk.vtk", "not a mesh");
+    one_line_error(
+        &["template", s(&not_vtk), "--out", out, "--sheet", sheet],
+        1,
+        &["not_vtk.vtk", "legacy VTK"],
+    );
+    let no_points = write(
+        "no_points.vtk",
+        &format!("{header}POINTS 0 float\nPOLYGONS 0 0\n"),
+    );
+    one_line_error(
+        &["template", s(&no_points), "--out", out, "--sheet", sheet],
+        1,
+        &["no_points.vtk", "no points"],
+    );
+    let open = write(
+        "open.vtk",
+        &format!("{header}POINTS 3 float\n0 0 0 1 0 0 0 1 0\nPOLYGONS 1 4\n3 0 1 2\n"),
+    );
+    one_line_error(
+        &["template", s(&open), "--out", out, "--sheet", sheet],
+        1,
+        &["open.vtk", "open"],
+    );
+    let text_file = write("shape.txt", "1 2 3");
+    one_line_error(
+        &["template", s(&text_file), "--out", out],
+        1,
+        &["shape.txt", "extension"],
+    );
+    one_line_error(
+        &["template", "no/such/mesh.vtk", "--out", out],
+        1,
+        &["no/such/mesh.vtk"],
+    );
+    // --label with a mesh.
+    one_line_error(
+        &["template", s(&open), "--out", out, "--label", "1"],
+        2,
+        &["--label"],
+    );
+    // Wrong command lines (exit 2).
+    // (clap prints its usage line after a conflict: exit 2, the error on the first line)
+    let o = medial(&[
+        "template",
+        s(&mask),
+        "--out",
+        out,
+        "--atoms",
+        "100",
+        "--spacing",
+        "2",
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = text(&o.stderr);
+    assert!(err.starts_with("error: ") && err.lines().next().unwrap().contains("--spacing"));
+    one_line_error(
+        &["template", s(&mask), "--out", out, "--voxel=-1"],
+        2,
+        &["--voxel"],
+    );
+    // Nothing was written: no template, no sheet, no figures.
+    for path in [out, sheet, s(&Path::new(out).with_extension("json"))] {
+        assert!(!Path::new(path).exists(), "{path} was written");
+    }
+    let o = medial(&["template", s(&mask)]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+}
