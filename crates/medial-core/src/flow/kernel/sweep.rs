@@ -170,11 +170,12 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
         let Self {
             layout,
             scale,
+            cutoff,
             points,
             partials,
             ..
         } = self;
-        let (points, scale) = (&points[..], *scale);
+        let (points, scale, cutoff2) = (&points[..], *scale, *cutoff * *cutoff);
         partials
             .par_chunks_mut(2 * C * layout.block)
             .zip(&layout.tiles)
@@ -189,6 +190,7 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
                     rows,
                     cols: layout.range(bj),
                     scale,
+                    cutoff2,
                     mask,
                 };
                 sweep_tile(isa, points, terms, &tile, buf);
@@ -276,11 +278,7 @@ impl Layout {
     /// chunk pairs (a, b), a ≤ b on a diagonal tile, whose chunks' bounding boxes are at most
     /// `cutoff` apart (or not comparable: non-finite coordinates); the tiles with none are
     /// left out.
-    fn truncated<const F: usize>(
-        points: &[[f64; F]],
-        cutoff: f64,
-        order: &mut Vec<usize>,
-    ) -> Self {
+    fn truncated<const F: usize>(points: &[[f64; F]], cutoff: f64, order: &mut Vec<usize>) -> Self {
         let position = |i: usize| [points[i][0], points[i][1], points[i][2]];
         let all = Aabb::of((0..points.len()).map(position));
         let cell = cutoff / CELLS_PER_CUTOFF;
@@ -441,6 +439,8 @@ struct Tile<'a> {
     rows: Range<usize>,
     cols: Range<usize>,
     scale: f64,
+    /// The square of the cutoff radius (∞ for an exact sweep).
+    cutoff2: f64,
     mask: &'a [u32],
 }
 
@@ -514,18 +514,17 @@ fn sweep_tile_with<const F: usize, const C: usize, T: PairTerms<F, C>, V: F64Lan
     }
 }
 
-/// The kernel values of the pairs of point `row` (at `qi`) with the [`LANES`] points of
-/// `chunk`, and `d = q_i − q_j`.
+/// The squared distances of point `i` (at `qi`) to the [`LANES`] points of `chunk`, and
+/// `d = q_i − q_j`.
 #[inline(always)]
-fn kernel_lanes<V: F64Lanes>(qi: &[V; 3], chunk: &[f64], scale: f64) -> (V, [V; 3]) {
+fn distances<V: F64Lanes>(qi: &[V; 3], chunk: &[f64]) -> (V, [V; 3]) {
     let qj = [
         V::load(chunk),
         V::load(&chunk[LANES..]),
         V::load(&chunk[2 * LANES..]),
     ];
     let d = [qi[0] - qj[0], qi[1] - qj[1], qi[2] - qj[2]];
-    let r2 = d[2].mul_add(d[2], d[1].mul_add(d[1], d[0] * d[0]));
-    (exp_neg_scaled(r2, scale), d)
+    (d[2].mul_add(d[2], d[1].mul_add(d[1], d[0] * d[0])), d)
 }
 
 /// `kernel` with its lanes `l ≤ last` set to 0.
@@ -581,7 +580,13 @@ fn sweep_masked_tile<
                 bits &= bits - 1;
                 let chunk = &columns[b * LANES * F..][..LANES * F];
                 let sums = &mut col_sums[b * LANES * C..][..LANES * C];
-                let (mut kij, d) = kernel_lanes(&qi, chunk, tile.scale);
+                let (r2, d) = distances(&qi, chunk);
+                // All LANES pairs beyond the cutoff: skipped, as the forward and backward
+                // passes at these positions both do.
+                if r2.all_greater(tile.cutoff2) {
+                    continue;
+                }
+                let mut kij = exp_neg_scaled(r2, tile.scale);
                 if DIAGONAL && b == a {
                     kij = zero_lanes_to(kij, l);
                 }
@@ -846,12 +851,20 @@ mod tests {
     #[test]
     fn truncation_sweeps_every_near_pair_once() {
         // Clusters and scattered points; σ small enough for most pairs to be far.
-        for (seed, k, sigma, eps) in [(6, 3_000, 0.3, 1e-10), (7, 1_100, 0.1, 1e-3), (8, 9, 1.0, 0.1)] {
+        for (seed, k, sigma, eps) in [
+            (6, 3_000, 0.3, 1e-10),
+            (7, 1_100, 0.1, 1e-3),
+            (8, 9, 1.0, 0.1),
+        ] {
             let mut points = random_points(seed, k);
             for p in points.iter_mut().step_by(3) {
                 p.0 *= 0.1;
             }
-            let r = GaussianKernel::new(sigma).unwrap().truncated(eps).unwrap().cutoff_radius();
+            let r = GaussianKernel::new(sigma)
+                .unwrap()
+                .truncated(eps)
+                .unwrap()
+                .cutoff_radius();
             let pairs = swept_pairs(&points, sigma, eps);
             assert!(pairs.windows(2).all(|w| w[0] < w[1]), "a pair swept twice");
             let near: Vec<(usize, usize)> = (0..k)
@@ -859,7 +872,10 @@ mod tests {
                 .filter(|&(i, j)| (points[i].0 - points[j].0).norm() <= r)
                 .collect();
             let swept: std::collections::HashSet<_> = pairs.iter().collect();
-            assert!(near.iter().all(|p| swept.contains(p)), "a near pair skipped");
+            assert!(
+                near.iter().all(|p| swept.contains(p)),
+                "a near pair skipped"
+            );
             assert!(pairs.len() < k * (k - 1) / 2 || k < 100, "no pair skipped");
             // The exact sweep evaluates every pair once (with a σ under which no value is 0).
             let all = swept_pairs(&points, 100.0, 0.0);
