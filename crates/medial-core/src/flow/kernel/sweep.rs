@@ -11,10 +11,12 @@
 //!
 //! **Exact** (the kernel's tolerance ε = 0): the slots are the points in their order and every
 //! tile is swept. **Truncated** (ε > 0): at every run the points are sorted along a Z-order
-//! curve of a cell grid of side `r/4`, `r = σ √(2 ln(1/ε))` the kernel's cutoff radius
-//! ([`GaussianKernel::cutoff_radius`]), so that the blocks of consecutive slots are small
-//! clusters; a tile is swept only if the bounding boxes of its two blocks are at most `r`
-//! apart. Every pair skipped is thus more than `r` apart and has `K_ij < ε`, so that
+//! curve of a cell grid of side `r/256`, `r = σ √(2 ln(1/ε))` the kernel's cutoff radius
+//! ([`GaussianKernel::cutoff_radius`]), so that the chunks of [`LANES`] consecutive slots are
+//! small clusters; a tile carries a mask of its chunk pairs whose bounding boxes are at most
+//! `r` apart, only those are swept (tiles with none are left out), and of a masked chunk pair a
+//! row whose [`LANES`] squared distances all exceed `r²` skips the exponential and the terms.
+//! Every pair skipped is thus more than `r` apart and has `K_ij < ε`, so that
 //!
 //! `|S_c(i) − S^ε_c(i)| ≤ ε Σ_{j skipped} |t_c(i, j)| ≤ ε Σ_{j ≠ i} |t_c(i, j)|`,
 //!
