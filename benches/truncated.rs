@@ -1,8 +1,8 @@
 //! One value + gradient evaluation (flow, kinetic energy, SSD, adjoint) with the truncated
 //! kernel on a real heart surface: the CAP left ventricle's ED endocardium and epicardium
-//! subdivided twice (25,862 points), σ = 4 mm, N = 10, ε = 1e-10, the target
+//! subdivided twice (25,868 points), σ = 4 mm, N = 10, ε = 1e-10, the target
 //! case. Before the criterion samples it prints the relative difference of the value and of
-//! the gradient (2-norm) from the exact kernel's, and the time of one evaluation at k = 102,762
+//! the gradient (2-norm) from the exact kernel's, and the time of one evaluation at k = 102,776
 //! (three subdivisions; timed twice by hand, as criterion would take minutes).
 
 #[path = "../tests/common/heart.rs"]

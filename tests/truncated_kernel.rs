@@ -1,7 +1,7 @@
 //! The truncated kernel on a real heart surface: the value and gradient of one evaluation
 //! within 1e-8 relative of the exact kernel's, at the σ = 4 mm and ε = 1e-10 (the
 //! once-subdivided CAP left ventricle, 6,552 points; the benchmark `truncated` runs the
-//! twice-subdivided one, 25,862 points).
+//! twice-subdivided one, 25,868 points).
 
 #[path = "common/heart.rs"]
 mod heart;

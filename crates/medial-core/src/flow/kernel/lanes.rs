@@ -30,6 +30,8 @@ pub(crate) trait F64Lanes: Real {
     fn load(v: &[f64]) -> Self;
     /// `v[0 … LANES − 1] = self`.
     fn store(self, v: &mut [f64]);
+    /// Whether every lane is greater than `x` (false where a lane is NaN).
+    fn all_greater(self, x: f64) -> bool;
 
     /// The lanes as an array.
     #[inline(always)]
@@ -190,6 +192,11 @@ impl F64Lanes for Portable {
     fn store(self, v: &mut [f64]) {
         v[..LANES].copy_from_slice(&self.0);
     }
+
+    #[inline(always)]
+    fn all_greater(self, x: f64) -> bool {
+        self.0.iter().all(|&l| l > x)
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -316,6 +323,19 @@ mod x86 {
                 _mm256_storeu_pd(v[4..].as_mut_ptr(), self.0[1]);
             }
         }
+
+        #[inline(always)]
+        fn all_greater(self, x: f64) -> bool {
+            // SAFETY: AVX2 is available (type invariant).
+            unsafe {
+                let x = _mm256_set1_pd(x);
+                let gt = _mm256_and_pd(
+                    _mm256_cmp_pd::<_CMP_GT_OQ>(self.0[0], x),
+                    _mm256_cmp_pd::<_CMP_GT_OQ>(self.0[1], x),
+                );
+                _mm256_movemask_pd(gt) == 0b1111
+            }
+        }
     }
 
     /// The lanes in one AVX-512 register (fused multiply-adds are part of AVX-512F).
@@ -399,6 +419,12 @@ mod x86 {
             let v = &mut v[..LANES];
             // SAFETY: `v` holds 8 numbers; AVX-512F is available (type invariant).
             unsafe { _mm512_storeu_pd(v.as_mut_ptr(), self.0) }
+        }
+
+        #[inline(always)]
+        fn all_greater(self, x: f64) -> bool {
+            // SAFETY: AVX-512F is available (type invariant).
+            unsafe { _mm512_cmp_pd_mask::<_CMP_GT_OQ>(self.0, _mm512_set1_pd(x)) == 0xff }
         }
     }
 }

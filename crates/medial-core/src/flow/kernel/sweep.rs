@@ -11,10 +11,12 @@
 //!
 //! **Exact** (the kernel's tolerance ε = 0): the slots are the points in their order and every
 //! tile is swept. **Truncated** (ε > 0): at every run the points are sorted along a Z-order
-//! curve of a cell grid of side `r/4`, `r = σ √(2 ln(1/ε))` the kernel's cutoff radius
-//! ([`GaussianKernel::cutoff_radius`]), so that the blocks of consecutive slots are small
-//! clusters; a tile is swept only if the bounding boxes of its two blocks are at most `r`
-//! apart. Every pair skipped is thus more than `r` apart and has `K_ij < ε`, so that
+//! curve of a cell grid of side `r/256`, `r = σ √(2 ln(1/ε))` the kernel's cutoff radius
+//! ([`GaussianKernel::cutoff_radius`]), so that the chunks of [`LANES`] consecutive slots are
+//! small clusters; a tile carries a mask of its chunk pairs whose bounding boxes are at most
+//! `r` apart, only those are swept (tiles with none are left out), and of a masked chunk pair a
+//! row whose [`LANES`] squared distances all exceed `r²` skips the exponential and the terms.
+//! Every pair skipped is thus more than `r` apart and has `K_ij < ε`, so that
 //!
 //! `|S_c(i) − S^ε_c(i)| ≤ ε Σ_{j skipped} |t_c(i, j)| ≤ ε Σ_{j ≠ i} |t_c(i, j)|`,
 //!
@@ -44,12 +46,18 @@ pub(super) const PADDING_DISTANCE: f64 = 1e100;
 /// large blocks make fewer partial sums to store and reduce when there are thousands.
 const BLOCK_RANGE: (usize, usize) = (64, 256);
 
-/// Rows of a block of a truncated sweep: small clusters, whose boxes skip most far pairs, yet
-/// enough pairs per tile (4,096) to make the per-tile work (partial sums) small.
-const TRUNCATED_BLOCK: usize = 64;
+/// Rows of a block of a truncated sweep: 32 chunks of [`LANES`] slots, whose pairs are pruned
+/// chunk pair by chunk pair (a mask of 32 bits per row chunk), so that blocks can be large
+/// (few tiles and partial sums) while the pairs swept stay near.
+const TRUNCATED_BLOCK: usize = 256;
 
-/// Cells of the grid of a truncated sweep per cutoff radius.
-const CELLS_PER_CUTOFF: f64 = 4.0;
+/// Chunks of [`LANES`] slots per block of a truncated sweep: at most the 32 bits of a mask.
+const CHUNKS_PER_BLOCK: usize = TRUNCATED_BLOCK / LANES;
+const _: () = assert!(CHUNKS_PER_BLOCK <= 32 && TRUNCATED_BLOCK % LANES == 0);
+
+/// Cells of the grid of a truncated sweep per cutoff radius: a fine curve, whose chunks of
+/// [`LANES`] consecutive points are tight clusters.
+const CELLS_PER_CUTOFF: f64 = 256.0;
 
 /// The terms `t_c(i, j)`, `c < C`, of pair sums `S_c(i) = Σ_{j ≠ i} K_ij t_c(i, j)` over points
 /// that carry `F` numbers each, the first three being the coordinates of the point.
@@ -86,6 +94,9 @@ pub(crate) struct PairSweep<const F: usize, const C: usize> {
     cutoff: f64,
     /// The numbers of every point, as set.
     staged: Vec<[f64; F]>,
+    /// A truncated sweep's order of the points along the curve, as of the last run: the
+    /// next run's sort starts from it (the order it ends with does not depend on it).
+    order: Vec<usize>,
     layout: Layout,
     points: Vec<f64>,
     /// Per tile, the partial sums of its rows, then those of its columns (`C·block` each).
@@ -106,6 +117,7 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
             scale: kernel.half_inv_sigma2,
             cutoff: kernel.cutoff_radius(),
             staged: vec![[0.0; F]; landmarks],
+            order: (0..landmarks).collect(),
             sums: vec![0.0; layout.padded * C],
             partials: Vec::new(),
             points,
@@ -136,7 +148,7 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
     /// [`PairSweep::run`] with the inner loops `isa` (or portable ones if the CPU lacks it).
     fn run_with<T: PairTerms<F, C>>(&mut self, terms: &T, isa: Isa) {
         if self.cutoff.is_finite() {
-            self.layout = Layout::truncated(&self.staged, self.cutoff);
+            self.layout = Layout::truncated(&self.staged, self.cutoff, &mut self.order);
         }
         self.lay_out_points();
         let len = self.layout.tiles.len() * 2 * C * self.layout.block;
@@ -160,19 +172,28 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
         let Self {
             layout,
             scale,
+            cutoff,
             points,
             partials,
             ..
         } = self;
-        let (points, scale) = (&points[..], *scale);
+        let (points, scale, cutoff2) = (&points[..], *scale, *cutoff * *cutoff);
         partials
             .par_chunks_mut(2 * C * layout.block)
             .zip(&layout.tiles)
-            .for_each(|(buf, &(bi, bj))| {
+            .enumerate()
+            .for_each(|(t, (buf, &(bi, bj)))| {
+                let rows = layout.range(bi);
+                let mask = match layout.masks.is_empty() {
+                    true => &[][..],
+                    false => &layout.masks[t * CHUNKS_PER_BLOCK..][..rows.len() / LANES],
+                };
                 let tile = Tile {
-                    rows: layout.range(bi),
+                    rows,
                     cols: layout.range(bj),
                     scale,
+                    cutoff2,
+                    mask,
                 };
                 sweep_tile(isa, points, terms, &tile, buf);
             });
@@ -228,6 +249,10 @@ struct Layout {
     block: usize,
     blocks: usize,
     tiles: Vec<(usize, usize)>,
+    /// A truncated sweep's masks of the chunk pairs swept: per tile, [`CHUNKS_PER_BLOCK`]
+    /// masks, bit `b` of mask `a` set when the pairs of row chunk `a` and column chunk `b`
+    /// are swept; empty for an exact sweep, whose tiles are swept whole.
+    masks: Vec<u32>,
     /// Per block, the partial sums to add in this order: `2t` the row sums of tile `t`,
     /// `2t + 1` its column sums.
     parts: Vec<Vec<usize>>,
@@ -242,48 +267,92 @@ impl Layout {
             .next_power_of_two()
             .clamp(BLOCK_RANGE.0, BLOCK_RANGE.1);
         let slot = (0..landmarks).collect();
-        Self::with_tiles(slot, padded, block, |_, _| true)
+        let blocks = padded.div_ceil(block);
+        let tiles = (0..blocks)
+            .flat_map(|bi| (bi..blocks).map(move |bj| (bi, bj)))
+            .collect();
+        Self::with_tiles(slot, padded, block, tiles, Vec::new())
     }
 
     /// The points sorted along the Z-order curve of a grid of cells of side
-    /// `cutoff / CELLS_PER_CUTOFF` (ties by index), blocks of [`TRUNCATED_BLOCK`] slots, and the
-    /// tiles whose blocks' bounding boxes are at most `cutoff` apart (or not comparable:
-    /// non-finite coordinates).
-    fn truncated<const F: usize>(points: &[[f64; F]], cutoff: f64) -> Self {
+    /// `cutoff / CELLS_PER_CUTOFF` (ties by index; `order`, the previous order, is sorted
+    /// into the new one), blocks of [`TRUNCATED_BLOCK`] slots, and per tile (I, J), I ≤ J, the
+    /// chunk pairs (a, b), a ≤ b on a diagonal tile, whose chunks' bounding boxes are at most
+    /// `cutoff` apart (or not comparable: non-finite coordinates); the tiles with none are
+    /// left out.
+    fn truncated<const F: usize>(points: &[[f64; F]], cutoff: f64, order: &mut Vec<usize>) -> Self {
         let position = |i: usize| [points[i][0], points[i][1], points[i][2]];
         let all = Aabb::of((0..points.len()).map(position));
         let cell = cutoff / CELLS_PER_CUTOFF;
-        let mut order: Vec<usize> = (0..points.len()).collect();
-        order.sort_by_cached_key(|&i| (morton_code(position(i), all.lo, cell), i));
+        // The codes with the index are distinct: every sort gives the same order whatever the
+        // one it starts from, and the stable sort is fast on the nearly sorted order of the
+        // previous time step.
+        let mut keyed: Vec<(u64, usize)> = (order.iter())
+            .map(|&i| (morton_code(position(i), all.lo, cell), i))
+            .collect();
+        keyed.sort();
+        order.clear();
+        order.extend(keyed.iter().map(|&(_, i)| i));
         let mut slot = vec![0; points.len()];
         for (s, &i) in order.iter().enumerate() {
             slot[i] = s;
         }
         let padded = points.len().div_ceil(LANES) * LANES;
-        let boxes: Vec<Aabb> = order
-            .chunks(TRUNCATED_BLOCK)
-            .map(|block| Aabb::of(block.iter().map(|&i| position(i))))
+        let chunk_boxes: Vec<Aabb> = order
+            .chunks(LANES)
+            .map(|chunk| Aabb::of(chunk.iter().map(|&i| position(i))))
             .collect();
-        // Kept unless provably far: a NaN gap (non-finite coordinates) keeps the tile.
-        let near = |bi: usize, bj: usize| {
-            let gap = boxes[bi].gap_squared(&boxes[bj]);
-            gap.partial_cmp(&(cutoff * cutoff)) != Some(std::cmp::Ordering::Greater)
+        let block_boxes: Vec<Aabb> = (chunk_boxes.chunks(CHUNKS_PER_BLOCK))
+            .map(|boxes| boxes.iter().fold(Aabb::EMPTY, |b, c| b.union(c)))
+            .collect();
+        // Kept unless provably far: a NaN gap (non-finite coordinates) keeps the pair.
+        let cutoff2 = cutoff * cutoff;
+        let near = |a: &Aabb, b: &Aabb| {
+            let gap = a.gap_squared(b);
+            gap.partial_cmp(&cutoff2) != Some(std::cmp::Ordering::Greater)
         };
-        Self::with_tiles(slot, padded, TRUNCATED_BLOCK, near)
+        let blocks = block_boxes.len();
+        let candidates: Vec<(usize, usize)> = (0..blocks)
+            .flat_map(|bi| (bi..blocks).map(move |bj| (bi, bj)))
+            .filter(|&(bi, bj)| near(&block_boxes[bi], &block_boxes[bj]))
+            .collect();
+        let chunks = |b: usize| {
+            let end = ((b + 1) * CHUNKS_PER_BLOCK).min(chunk_boxes.len());
+            &chunk_boxes[b * CHUNKS_PER_BLOCK..end]
+        };
+        let masks: Vec<[u32; CHUNKS_PER_BLOCK]> = (candidates.par_iter())
+            .map(|&(bi, bj)| {
+                let mut masks = [0u32; CHUNKS_PER_BLOCK];
+                let cols = chunks(bj);
+                for (a, row) in chunks(bi).iter().enumerate() {
+                    if !near(row, &block_boxes[bj]) {
+                        continue;
+                    }
+                    let first = if bi == bj { a } else { 0 };
+                    for (b, col) in cols.iter().enumerate().skip(first) {
+                        masks[a] |= u32::from(near(row, col)) << b;
+                    }
+                }
+                masks
+            })
+            .collect();
+        let (tiles, masks): (Vec<_>, Vec<_>) = (candidates.into_iter().zip(masks))
+            .filter(|(_, masks)| masks.iter().any(|&m| m != 0))
+            .unzip();
+        let masks = masks.into_iter().flatten().collect();
+        Self::with_tiles(slot, padded, TRUNCATED_BLOCK, tiles, masks)
     }
 
-    /// The layout of `slot` with the tiles (I, J), I ≤ J, for which `swept(I, J)`.
+    /// The layout of `slot` with the `tiles` (I, J), I ≤ J, in row-major order, and their
+    /// chunk masks (see [`Layout::masks`]).
     fn with_tiles(
         slot: Vec<usize>,
         padded: usize,
         block: usize,
-        swept: impl Fn(usize, usize) -> bool,
+        tiles: Vec<(usize, usize)>,
+        masks: Vec<u32>,
     ) -> Self {
         let blocks = padded.div_ceil(block);
-        let tiles: Vec<(usize, usize)> = (0..blocks)
-            .flat_map(|bi| (bi..blocks).map(move |bj| (bi, bj)))
-            .filter(|&(bi, bj)| swept(bi, bj))
-            .collect();
         let mut parts = vec![Vec::new(); blocks];
         for (t, &(bi, bj)) in tiles.iter().enumerate() {
             parts[bi].push(2 * t);
@@ -295,6 +364,7 @@ impl Layout {
             block,
             blocks,
             tiles,
+            masks,
             parts,
         }
     }
@@ -329,13 +399,23 @@ struct Aabb {
 }
 
 impl Aabb {
+    /// The box of no point.
+    const EMPTY: Self = Self {
+        lo: [f64::INFINITY; 3],
+        hi: [f64::NEG_INFINITY; 3],
+    };
+
+    /// The box of both boxes.
+    fn union(&self, other: &Self) -> Self {
+        Self {
+            lo: std::array::from_fn(|a| self.lo[a].min(other.lo[a])),
+            hi: std::array::from_fn(|a| self.hi[a].max(other.hi[a])),
+        }
+    }
+
     /// The box of `points` (lo = +∞, hi = −∞ for none; NaN coordinates are left out).
     fn of(points: impl Iterator<Item = [f64; 3]>) -> Self {
-        let empty = Self {
-            lo: [f64::INFINITY; 3],
-            hi: [f64::NEG_INFINITY; 3],
-        };
-        points.fold(empty, |b, p| Self {
+        points.fold(Self::EMPTY, |b, p| Self {
             lo: std::array::from_fn(|a| b.lo[a].min(p[a])),
             hi: std::array::from_fn(|a| b.hi[a].max(p[a])),
         })
@@ -354,12 +434,16 @@ impl Aabb {
     }
 }
 
-/// One tile: rows I and columns J, both starting at a multiple of [`LANES`], and the kernel's
-/// `1/(2σ²)`.
-struct Tile {
+/// One tile: rows I and columns J, both starting at a multiple of [`LANES`], the kernel's
+/// `1/(2σ²)` and, on a truncated sweep, the masks of its chunk pairs (see [`Layout::masks`]),
+/// one per row chunk; empty: every pair.
+struct Tile<'a> {
     rows: Range<usize>,
     cols: Range<usize>,
     scale: f64,
+    /// The square of the cutoff radius (∞ for an exact sweep).
+    cutoff2: f64,
+    mask: &'a [u32],
 }
 
 /// The partial sums of one tile into `buf` (see [`PairSweep::partials`]) with the inner loops
@@ -368,7 +452,7 @@ fn sweep_tile<const F: usize, const C: usize, T: PairTerms<F, C>>(
     isa: Isa,
     points: &[f64],
     terms: &T,
-    tile: &Tile,
+    tile: &Tile<'_>,
     buf: &mut [f64],
 ) {
     match isa {
@@ -395,7 +479,7 @@ fn sweep_tile<const F: usize, const C: usize, T: PairTerms<F, C>>(
 unsafe fn sweep_tile_avx2_fma<const F: usize, const C: usize, T: PairTerms<F, C>>(
     points: &[f64],
     terms: &T,
-    tile: &Tile,
+    tile: &Tile<'_>,
     buf: &mut [f64],
 ) {
     sweep_tile_with::<F, C, T, lanes::Avx2Fma>(points, terms, tile, buf)
@@ -410,7 +494,7 @@ unsafe fn sweep_tile_avx2_fma<const F: usize, const C: usize, T: PairTerms<F, C>
 unsafe fn sweep_tile_avx512<const F: usize, const C: usize, T: PairTerms<F, C>>(
     points: &[f64],
     terms: &T,
-    tile: &Tile,
+    tile: &Tile<'_>,
     buf: &mut [f64],
 ) {
     sweep_tile_with::<F, C, T, lanes::Avx512>(points, terms, tile, buf)
@@ -421,13 +505,99 @@ unsafe fn sweep_tile_avx512<const F: usize, const C: usize, T: PairTerms<F, C>>(
 fn sweep_tile_with<const F: usize, const C: usize, T: PairTerms<F, C>, V: F64Lanes>(
     points: &[f64],
     terms: &T,
-    tile: &Tile,
+    tile: &Tile<'_>,
     buf: &mut [f64],
 ) {
-    if tile.rows.start == tile.cols.start {
-        sweep_tile_body::<F, C, T, V, true>(points, terms, tile, buf)
-    } else {
-        sweep_tile_body::<F, C, T, V, false>(points, terms, tile, buf)
+    match (tile.mask.is_empty(), tile.rows.start == tile.cols.start) {
+        (true, true) => sweep_tile_body::<F, C, T, V, true>(points, terms, tile, buf),
+        (true, false) => sweep_tile_body::<F, C, T, V, false>(points, terms, tile, buf),
+        (false, true) => sweep_masked_tile::<F, C, T, V, true>(points, terms, tile, buf),
+        (false, false) => sweep_masked_tile::<F, C, T, V, false>(points, terms, tile, buf),
+    }
+}
+
+/// The squared distances of point `i` (at `qi`) to the [`LANES`] points of `chunk`, and
+/// `d = q_i − q_j`.
+#[inline(always)]
+fn distances<V: F64Lanes>(qi: &[V; 3], chunk: &[f64]) -> (V, [V; 3]) {
+    let qj = [
+        V::load(chunk),
+        V::load(&chunk[LANES..]),
+        V::load(&chunk[2 * LANES..]),
+    ];
+    let d = [qi[0] - qj[0], qi[1] - qj[1], qi[2] - qj[2]];
+    (d[2].mul_add(d[2], d[1].mul_add(d[1], d[0] * d[0])), d)
+}
+
+/// `kernel` with its lanes `l ≤ last` set to 0.
+#[inline(always)]
+fn zero_lanes_to<V: F64Lanes>(kernel: V, last: usize) -> V {
+    let mut k = kernel.to_array();
+    for k in &mut k[..=last] {
+        *k = 0.0;
+    }
+    V::from_array(k)
+}
+
+/// One tile of a truncated sweep: for each row i of a row chunk `a`, the pairs (i, j) with j in
+/// the column chunks `b` of mask `a` (j > i on a `DIAGONAL` tile), LANES at a time. Sums as in
+/// [`sweep_tile_body`]; the rows of a chunk with no pair have row sums 0.
+#[inline(always)]
+fn sweep_masked_tile<
+    const F: usize,
+    const C: usize,
+    T: PairTerms<F, C>,
+    V: F64Lanes,
+    const DIAGONAL: bool,
+>(
+    points: &[f64],
+    terms: &T,
+    tile: &Tile<'_>,
+    buf: &mut [f64],
+) {
+    let (row_sums, col_sums) = buf.split_at_mut(buf.len() / 2);
+    col_sums.fill(0.0);
+    row_sums.fill(0.0);
+    let columns = &points[tile.cols.start * F..tile.cols.end * F];
+    for (a, &mask) in tile.mask.iter().enumerate() {
+        if mask == 0 {
+            continue;
+        }
+        for l in 0..LANES {
+            let r = a * LANES + l;
+            let base = chunked(tile.rows.start + r, F);
+            let mut row = [0.0; F];
+            for (f, x) in row.iter_mut().enumerate() {
+                *x = points[base + LANES * f];
+            }
+            let qi = [V::splat(row[0]), V::splat(row[1]), V::splat(row[2])];
+            let mut acc = [V::splat(0.0); C];
+            // On a diagonal tile, the last row of chunk `a` has no pair in it.
+            let mut bits = mask;
+            if DIAGONAL && l == LANES - 1 {
+                bits &= !(1 << a);
+            }
+            while bits != 0 {
+                let b = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let chunk = &columns[b * LANES * F..][..LANES * F];
+                let sums = &mut col_sums[b * LANES * C..][..LANES * C];
+                let (r2, d) = distances(&qi, chunk);
+                // All LANES pairs beyond the cutoff: skipped, as the forward and backward
+                // passes at these positions both do.
+                if r2.all_greater(tile.cutoff2) {
+                    continue;
+                }
+                let mut kij = exp_neg_scaled(r2, tile.scale);
+                if DIAGONAL && b == a {
+                    kij = zero_lanes_to(kij, l);
+                }
+                terms.accumulate(&row, chunk, kij, &d, &mut acc, sums);
+            }
+            for (c, acc) in acc.iter().enumerate() {
+                row_sums[chunked(r, C) + LANES * c] = acc.sum();
+            }
+        }
     }
 }
 
@@ -444,7 +614,7 @@ fn sweep_tile_body<
 >(
     points: &[f64],
     terms: &T,
-    tile: &Tile,
+    tile: &Tile<'_>,
     buf: &mut [f64],
 ) {
     let (row_sums, col_sums) = buf.split_at_mut(buf.len() / 2);
@@ -638,6 +808,80 @@ mod tests {
         let magnitudes = term_magnitudes(&points);
         for ((t, e), m) in truncated.iter().zip(&exact).zip(&magnitudes) {
             assert!((t[0] - e[0]).abs() <= 1e-10 * m[0] + 1e-13 * m[0]);
+        }
+    }
+
+    /// Terms that record the pairs swept: a point carries its index + 1 (0 for padding), and
+    /// every lane with a kernel value not 0 (masked lanes and padding have 0) is a pair.
+    struct PairLog(std::sync::Mutex<Vec<(usize, usize)>>);
+
+    impl PairTerms<4, 1> for PairLog {
+        fn accumulate<V: F64Lanes>(
+            &self,
+            row: &[f64; 4],
+            chunk: &[f64],
+            kernel: V,
+            _d: &[V; 3],
+            _row_sums: &mut [V; 1],
+            _col_sums: &mut [f64],
+        ) {
+            let mut log = self.0.lock().unwrap();
+            for (l, k) in kernel.to_array().into_iter().enumerate() {
+                let (i, j) = (row[3] as usize, chunk[3 * LANES + l] as usize);
+                if k != 0.0 && j > 0 {
+                    log.push(((i - 1).min(j - 1), (i - 1).max(j - 1)));
+                }
+            }
+        }
+    }
+
+    /// The pairs {i, j}, i < j, that a sweep with the tolerance `eps` evaluates, sorted, each
+    /// as often as it is evaluated.
+    fn swept_pairs(points: &[(Vec3, f64)], sigma: f64, eps: f64) -> Vec<(usize, usize)> {
+        let kernel = GaussianKernel::new(sigma).unwrap().truncated(eps).unwrap();
+        let mut sweep = PairSweep::<4, 1>::new(&kernel, points.len());
+        for (i, (q, _)) in points.iter().enumerate() {
+            sweep.set_point(i, [q.x, q.y, q.z, (i + 1) as f64]);
+        }
+        let log = PairLog(Default::default());
+        sweep.run_with(&log, Isa::best());
+        let mut pairs = log.0.into_inner().unwrap();
+        pairs.sort_unstable();
+        pairs
+    }
+
+    #[test]
+    fn truncation_sweeps_every_near_pair_once() {
+        // Clusters and scattered points; σ small enough for most pairs to be far.
+        for (seed, k, sigma, eps) in [
+            (6, 3_000, 0.3, 1e-10),
+            (7, 1_100, 0.1, 1e-3),
+            (8, 9, 1.0, 0.1),
+        ] {
+            let mut points = random_points(seed, k);
+            for p in points.iter_mut().step_by(3) {
+                p.0 *= 0.1;
+            }
+            let r = GaussianKernel::new(sigma)
+                .unwrap()
+                .truncated(eps)
+                .unwrap()
+                .cutoff_radius();
+            let pairs = swept_pairs(&points, sigma, eps);
+            assert!(pairs.windows(2).all(|w| w[0] < w[1]), "a pair swept twice");
+            let near: Vec<(usize, usize)> = (0..k)
+                .flat_map(|i| (i + 1..k).map(move |j| (i, j)))
+                .filter(|&(i, j)| (points[i].0 - points[j].0).norm() <= r)
+                .collect();
+            let swept: std::collections::HashSet<_> = pairs.iter().collect();
+            assert!(
+                near.iter().all(|p| swept.contains(p)),
+                "a near pair skipped"
+            );
+            assert!(pairs.len() < k * (k - 1) / 2 || k < 100, "no pair skipped");
+            // The exact sweep evaluates every pair once (with a σ under which no value is 0).
+            let all = swept_pairs(&points, 100.0, 0.0);
+            assert_eq!(all.len(), k * (k - 1) / 2);
         }
     }
 
