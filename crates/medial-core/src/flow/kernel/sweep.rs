@@ -529,6 +529,18 @@ fn distances<V: F64Lanes>(qi: &[V; 3], chunk: &[f64]) -> (V, [V; 3]) {
     (d[2].mul_add(d[2], d[1].mul_add(d[1], d[0] * d[0])), d)
 }
 
+/// The numbers of point `i` (its slot in the chunked layout) and its position in every lane.
+#[inline(always)]
+fn load_row<const F: usize, V: F64Lanes>(points: &[f64], i: usize) -> ([f64; F], [V; 3]) {
+    let base = chunked(i, F);
+    let mut row = [0.0; F];
+    for (f, x) in row.iter_mut().enumerate() {
+        *x = points[base + LANES * f];
+    }
+    let qi = [V::splat(row[0]), V::splat(row[1]), V::splat(row[2])];
+    (row, qi)
+}
+
 /// `kernel` with its lanes `l ≤ last` set to 0.
 #[inline(always)]
 fn zero_lanes_to<V: F64Lanes>(kernel: V, last: usize) -> V {
@@ -565,12 +577,7 @@ fn sweep_masked_tile<
         }
         for l in 0..LANES {
             let r = a * LANES + l;
-            let base = chunked(tile.rows.start + r, F);
-            let mut row = [0.0; F];
-            for (f, x) in row.iter_mut().enumerate() {
-                *x = points[base + LANES * f];
-            }
-            let qi = [V::splat(row[0]), V::splat(row[1]), V::splat(row[2])];
+            let (row, qi) = load_row::<F, V>(points, tile.rows.start + r);
             let mut acc = [V::splat(0.0); C];
             // On a diagonal tile, the last row of chunk `a` has no pair in it.
             let mut bits = mask;
@@ -621,12 +628,7 @@ fn sweep_tile_body<
     col_sums.fill(0.0);
     let columns = &points[tile.cols.start * F..tile.cols.end * F];
     for (r, i) in tile.rows.clone().enumerate() {
-        let base = chunked(i, F);
-        let mut row = [0.0; F];
-        for (f, x) in row.iter_mut().enumerate() {
-            *x = points[base + LANES * f];
-        }
-        let qi = [V::splat(row[0]), V::splat(row[1]), V::splat(row[2])];
+        let (row, qi) = load_row::<F, V>(points, i);
         let mut acc = [V::splat(0.0); C];
         // On a diagonal tile, start at the chunk holding i + 1 and mask its lanes j ≤ i.
         let first = if DIAGONAL {
@@ -637,23 +639,11 @@ fn sweep_tile_body<
         let chunks = columns[first * LANES * F..].chunks_exact(LANES * F);
         let sums = col_sums[first * LANES * C..].chunks_exact_mut(LANES * C);
         for (n, (chunk, sums)) in (first..).zip(chunks.zip(sums)) {
-            let qj = [
-                V::load(chunk),
-                V::load(&chunk[LANES..]),
-                V::load(&chunk[2 * LANES..]),
-            ];
-            let d = [qi[0] - qj[0], qi[1] - qj[1], qi[2] - qj[2]];
-            let r2 = d[2].mul_add(d[2], d[1].mul_add(d[1], d[0] * d[0]));
+            let (r2, d) = distances(&qi, chunk);
             let mut kij = exp_neg_scaled(r2, tile.scale);
             let j = tile.cols.start + n * LANES;
             if DIAGONAL && j <= i {
-                let mut k = kij.to_array();
-                for (l, k) in k.iter_mut().enumerate() {
-                    if j + l <= i {
-                        *k = 0.0;
-                    }
-                }
-                kij = V::from_array(k);
+                kij = zero_lanes_to(kij, i - j);
             }
             terms.accumulate(&row, chunk, kij, &d, &mut acc, sums);
         }
