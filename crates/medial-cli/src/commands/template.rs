@@ -48,12 +48,19 @@ const COARSE_VOXELS: f64 = 96.0;
 /// The targets of a template against its shape (the issue's): voxel Dice.
 const TARGET_DICE: f64 = 0.95;
 
+/// The largest spoke–normal angle of a finished template, degrees.
+const MAX_ANGLE_DEG: f64 = 0.1;
+
+/// The largest spoke mismatch of a finished template, %.
+const MAX_MISMATCH_PCT: f64 = 0.1;
+
 /// Build a medial template from a segmentation or a closed mesh.
 #[derive(clap::Args, Debug)]
 #[command(group(clap::ArgGroup::new("sampling").args(["spacing", "atoms"])))]
 pub struct TemplateArgs {
     /// The shape: a binary segmentation (.nii, .nii.gz, .exr; foreground = value > 0 or
-    /// --label; a graded signed image, a level set, is cut at 0 on the fine grid) or a closed triangle mesh (.vtk, .obj, .gltf, .glb), world coordinates in mm.
+    /// --label; a graded signed image, a level set, is cut at 0 on the fine grid) or a closed
+    /// triangle mesh (.vtk, .obj, .gltf, .glb), world coordinates in mm.
     /// One sheet shaped as a disc or a bowl (heart wall, placenta, leaflet).
     #[arg(value_name = "SHAPE")]
     pub shape: PathBuf,
@@ -110,9 +117,10 @@ impl Shape {
             .any(|e| name.ends_with(e))
         {
             let image = medial_io::volume::read_volume(&args.shape)?;
+            let mask = Box::new(image.foreground(args.label));
             let graded =
-                (args.label.is_none() && image.is_graded_signed()).then(|| Box::new(image.clone()));
-            Ok(Self::Mask(Box::new(image.foreground(args.label)), graded))
+                (args.label.is_none() && image.is_graded_signed()).then(|| Box::new(image));
+            Ok(Self::Mask(mask, graded))
         } else if args.label.is_some() {
             Err(CliError::Usage("--label needs a segmentation".into()))
         } else {
@@ -276,7 +284,59 @@ pub fn run(args: &TemplateArgs, threads: usize, quiet: bool) -> Result<(), CliEr
         .clone()
         .unwrap_or_else(|| args.out.with_extension("json"));
     write_json(&path, &figures)?;
-    print_json(&figures)
+    print_json(&figures)?;
+    figures.verdict(&args.out)
+}
+
+impl TemplateFigures {
+    /// [`verdict`] of these figures.
+    fn verdict(&self, out: &Path) -> Result<(), CliError> {
+        let defects = [
+            (self.closed_manifold, "not a closed oriented manifold"),
+            (self.outward, "not outward"),
+            (self.self_intersection_free, "self-intersecting"),
+        ];
+        let spokes = [self.max_spoke_normal_deg, self.max_spoke_mismatch_pct];
+        verdict(out, defects, spokes, self.dice)
+    }
+}
+
+/// `Ok` for a template that can be used: every check of `defects` (whether it holds, what the
+/// boundary is when it does not) holds, else [`CliError::Unsound`] (exit 3), and its largest
+/// spoke–normal angle (°) and mismatch (%) are within the targets, else
+/// [`CliError::ConstraintsNotMet`] (exit 4). A Dice below the target only warns: the template is
+/// sound, the figures say how well it matches.
+fn verdict(
+    out: &Path,
+    defects: [(bool, &str); 3],
+    [angle_deg, mismatch_pct]: [f64; 2],
+    dice: f64,
+) -> Result<(), CliError> {
+    let causes: Vec<&str> = (defects.iter())
+        .filter(|(holds, _)| !holds)
+        .map(|&(_, what)| what)
+        .collect();
+    if !causes.is_empty() {
+        return Err(CliError::Unsound(format!(
+            "{}: the template's boundary is {} (written with its figures, marked in them)",
+            out.display(),
+            causes.join(", ")
+        )));
+    }
+    if !(angle_deg <= MAX_ANGLE_DEG && mismatch_pct <= MAX_MISMATCH_PCT) {
+        return Err(CliError::ConstraintsNotMet(format!(
+            "{}: the template ends at {angle_deg:.3}° and {mismatch_pct:.3} %, above \
+             {MAX_ANGLE_DEG}° / {MAX_MISMATCH_PCT} % (written with its figures)",
+            out.display()
+        )));
+    }
+    if dice < TARGET_DICE {
+        tracing::warn!(
+            "{}: Dice {dice:.3} against the shape, below the target {TARGET_DICE}",
+            out.display()
+        );
+    }
+    Ok(())
 }
 
 /// The shape on its fine grid and that grid's voxel (mm): `--voxel`, or a third of the
@@ -408,8 +468,8 @@ fn figures_of(
     let self_intersection_free = self_intersections(&boundary).is_empty();
     let fold = |f: fn(f64, f64) -> f64, init| metrics.thickness.iter().copied().fold(init, f);
     let meets_targets = dice >= TARGET_DICE
-        && summary.max_spoke_normal_deg <= 0.1
-        && summary.max_spoke_mismatch_pct <= 0.1
+        && summary.max_spoke_normal_deg <= MAX_ANGLE_DEG
+        && summary.max_spoke_mismatch_pct <= MAX_MISMATCH_PCT
         && closed_manifold
         && outward
         && self_intersection_free;
@@ -440,4 +500,34 @@ fn figures_of(
         seconds: 0.0,
         summary,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_broken_or_unprojected_template_is_not_a_success() {
+        let out = Path::new("t.vtk");
+        let sound = [(true, "a"), (true, "b"), (true, "c")];
+        assert!(
+            verdict(out, sound, [0.05, 0.05], 0.9).is_ok(),
+            "a low Dice only warns"
+        );
+        let folded = [
+            (true, "a"),
+            (false, "not outward"),
+            (false, "self-intersecting"),
+        ];
+        let e = verdict(out, folded, [0.0, 0.0], 0.99).unwrap_err();
+        assert_eq!(e.exit_code(), 3);
+        assert!(
+            e.to_string().contains("not outward, self-intersecting"),
+            "{e}"
+        );
+        for spokes in [[0.2, 0.0], [0.0, 0.2], [f64::NAN, 0.0]] {
+            let e = verdict(out, sound, spokes, 0.99).unwrap_err();
+            assert_eq!(e.exit_code(), 4, "{spokes:?}: {e}");
+        }
+    }
 }
