@@ -267,10 +267,7 @@ impl Layout {
             .next_power_of_two()
             .clamp(BLOCK_RANGE.0, BLOCK_RANGE.1);
         let slot = (0..landmarks).collect();
-        let blocks = padded.div_ceil(block);
-        let tiles = (0..blocks)
-            .flat_map(|bi| (bi..blocks).map(move |bj| (bi, bj)))
-            .collect();
+        let tiles = upper_tiles(padded.div_ceil(block)).collect();
         Self::with_tiles(slot, padded, block, tiles, Vec::new())
     }
 
@@ -311,9 +308,7 @@ impl Layout {
             let gap = a.gap_squared(b);
             gap.partial_cmp(&cutoff2) != Some(std::cmp::Ordering::Greater)
         };
-        let blocks = block_boxes.len();
-        let candidates: Vec<(usize, usize)> = (0..blocks)
-            .flat_map(|bi| (bi..blocks).map(move |bj| (bi, bj)))
+        let candidates: Vec<(usize, usize)> = upper_tiles(block_boxes.len())
             .filter(|&(bi, bj)| near(&block_boxes[bi], &block_boxes[bj]))
             .collect();
         let chunks = |b: usize| {
@@ -432,6 +427,11 @@ impl Aabb {
             })
             .sum()
     }
+}
+
+/// The tiles (I, J), I ≤ J, of `blocks` blocks, in row-major order.
+fn upper_tiles(blocks: usize) -> impl Iterator<Item = (usize, usize)> {
+    (0..blocks).flat_map(move |bi| (bi..blocks).map(move |bj| (bi, bj)))
 }
 
 /// One tile: rows I and columns J, both starting at a multiple of [`LANES`], the kernel's
