@@ -9,9 +9,10 @@ use crate::config::{
     StageConfig,
 };
 use medial_core::attachment::varifold::default_width;
+use medial_core::flow::kernel::GaussianKernel;
 use medial_core::model::template::MedialTemplate;
 use medial_core::synth::PrincipalAxes;
-use medial_core::TriMesh;
+use medial_core::{TriMesh, Vec3};
 use serde::Serialize;
 use std::path::PathBuf;
 
@@ -107,7 +108,10 @@ impl FitPlan {
     /// - corresponding points: SSD;
     /// - a surface: varifold, the schedule of points, then a second varifold stage at a
     ///   narrower kernel ([`varifold_widths`]) from μ = 2000 over 2 AL iterations of 300.
-    pub fn automatic(&self, template: PathBuf, target: &Target) -> Config {
+    ///
+    /// The kernel is truncated as [`kernel_tolerance`] decides for the template's landmarks
+    /// `landmarks`.
+    pub fn automatic(&self, template: PathBuf, target: &Target, landmarks: &[Vec3]) -> Config {
         let a = &AUTOMATIC;
         let stages = match target {
             Target::Image {
@@ -152,6 +156,7 @@ impl FitPlan {
         let mut config = self.config_of(template, stages);
         config.flow.time_steps = a.time_steps;
         config.flow.sigma = (a.sigma_factor * self.sigma * 100.0).round() / 100.0;
+        config.flow.kernel_tolerance = kernel_tolerance(config.flow.sigma, landmarks);
         config
     }
 
@@ -335,6 +340,33 @@ const AUTOMATIC: Automatic = Automatic {
 /// between the two.
 const SIGMA_FACTOR: f64 = 0.55;
 
+/// The kernel tolerance ε of an automatic fit that truncates its kernel: the sums then err by
+/// at most 1e-10 of the sums of absolute terms (see `medial_core::flow`), far below what a fit
+/// can tell.
+const KERNEL_TOLERANCE: f64 = 1e-10;
+
+/// An automatic fit truncates its kernel when at most this fraction of the template's landmark
+/// pairs lie within the cutoff radius `r = σ √(2 ln(1/ε))`: the truncated sweep's cell grid
+/// and chunk masks cost more than they skip when most pairs are near. Measured on image fits
+/// (the automatic schedule, wall time exact / truncated, median of 3): the toy (25 % of the
+/// pairs near) 0.91, t001-bent (14 %) 1.25, the cup (8 %) 1.20, the anterior mitral leaflet
+/// (2 %, k = 1,433) 1.6; figures equal to the third digit.
+const TRUNCATE_AT_MOST: f64 = 0.2;
+
+/// `[flow] kernel_tolerance` of an automatic fit with kernel width `sigma` (mm) of a template
+/// with landmarks `landmarks`: [`KERNEL_TOLERANCE`] when at most [`TRUNCATE_AT_MOST`] of
+/// their pairs are near, else 0 (exact).
+pub fn kernel_tolerance(sigma: f64, landmarks: &[Vec3]) -> f64 {
+    let near = GaussianKernel::new(sigma)
+        .and_then(|k| k.truncated(KERNEL_TOLERANCE))
+        .map_or(1.0, |k| k.near_pair_fraction(landmarks));
+    if near <= TRUNCATE_AT_MOST {
+        KERNEL_TOLERANCE
+    } else {
+        0.0
+    }
+}
+
 /// The second varifold stage's kernel width, as a fraction of the first's (see
 /// [`Automatic::surface_fine`]).
 const FINE_WIDTH_FRACTION: f64 = 0.25;
@@ -470,7 +502,12 @@ const PLAIN_ITERATIONS: usize = 300;
 /// points (SSD) or a surface (varifold): one stage of [`PLAIN_ITERATIONS`], N =
 /// [`AUTOMATIC`]'s time steps, kernel width `sigma`, w_kin [`PLAIN_KINETIC_WEIGHT`]. None for
 /// an image: the Dice term needs a medial template's interior.
-pub fn automatic_plain(template: PathBuf, target: &Target, sigma: f64) -> Option<Config> {
+pub fn automatic_plain(
+    template: PathBuf,
+    target: &Target,
+    sigma: f64,
+    landmarks: &[Vec3],
+) -> Option<Config> {
     let mut stage = match target {
         Target::Image { .. } => return None,
         Target::Points(path) => {
@@ -492,6 +529,7 @@ pub fn automatic_plain(template: PathBuf, target: &Target, sigma: f64) -> Option
             sigma: (sigma * 100.0).round() / 100.0,
             time_steps: AUTOMATIC.time_steps,
             kinetic_weight: PLAIN_KINETIC_WEIGHT,
+            kernel_tolerance: kernel_tolerance(sigma, landmarks),
             ..FlowConfig::default()
         },
         output: OutputConfig::default(),

@@ -193,7 +193,9 @@ fn automatic_medial(
     let spacing = (geometry.mean_spoke_mm / 2.0).max(geometry.long_extent_mm / 256.0);
     let (alignment, target) = target_and_alignment(&boundary, inputs, spacing)?;
     let aligned = write_aligned(template, &alignment, out)?;
-    Ok(geometry.plan().automatic(aligned, &target))
+    Ok(geometry
+        .plan()
+        .automatic(aligned, &target, template.landmarks()))
 }
 
 /// [`automatic`] for a plain mesh: the whole initial map is applied (there are no constraints
@@ -225,7 +227,7 @@ fn automatic_plain(
         &carry_mesh(mesh, &alignment)?,
         write_options(false),
     )?;
-    crate::plan::automatic_plain(aligned, &target, sigma).ok_or_else(dice_refused)
+    crate::plan::automatic_plain(aligned, &target, sigma, mesh.points()).ok_or_else(dice_refused)
 }
 
 /// An initial map that is at most this far from a similarity ([`anisotropy`]) is taken as its

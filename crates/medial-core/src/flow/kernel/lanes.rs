@@ -224,7 +224,9 @@ mod x86 {
         /// `f` on each of the two registers.
         #[inline(always)]
         fn map(self, f: impl Fn(__m256d) -> __m256d) -> Self {
-            Self(self.0.map(f))
+            // Not `array::map`: it is not always inlined, and then neither are the intrinsics
+            // under it (they can only be inlined into code compiled for AVX2 and FMA).
+            Self([f(self.0[0]), f(self.0[1])])
         }
 
         /// `f` on the registers of `self` and `a` pairwise.

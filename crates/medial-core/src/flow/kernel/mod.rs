@@ -34,6 +34,9 @@ pub(crate) use sweep::{PairSweep, PairTerms};
 /// on the adjoint's sums needs (see the `sweep` module).
 pub const MAX_TOLERANCE: f64 = 0.5;
 
+/// Most points [`GaussianKernel::near_pair_fraction`] compares pairwise.
+pub const NEAR_PAIR_SAMPLE: usize = 4096;
+
 /// Gaussian kernel of width `σ` (same unit as the coordinates), exact or truncated: with a
 /// tolerance ε > 0, the sums over pairs skip pairs whose kernel value is below ε.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -90,6 +93,28 @@ impl GaussianKernel {
         } else {
             f64::INFINITY
         }
+    }
+
+    /// The fraction of the unordered pairs of `points` nearer than [`Self::cutoff_radius`]:
+    /// what a truncated sweep over them cannot skip (1 for the exact kernel; 1 for fewer than
+    /// two points). Of more than [`NEAR_PAIR_SAMPLE`] points an evenly strided subset of about
+    /// that many is counted (O(n²) over at most that many).
+    pub fn near_pair_fraction(&self, points: &[crate::Vec3]) -> f64 {
+        let stride = points.len().div_ceil(NEAR_PAIR_SAMPLE).max(1);
+        let sample: Vec<_> = points.iter().step_by(stride).collect();
+        let n = sample.len();
+        if n < 2 || self.tolerance == 0.0 {
+            return 1.0;
+        }
+        let r2 = self.cutoff_radius().powi(2);
+        let near: usize = (0..n)
+            .map(|i| {
+                (i + 1..n)
+                    .filter(|&j| (sample[i] - sample[j]).norm_squared() <= r2)
+                    .count()
+            })
+            .sum();
+        near as f64 / (n * (n - 1) / 2) as f64
     }
 
     /// `η` as a function of the squared distance: `exp(−r² / (2σ²))`.
@@ -151,25 +176,44 @@ pub(crate) fn exp_neg_scaled<V: Real>(y: V, scale: f64) -> V {
 /// of Horner's 11, so that the CPU does not wait on each one in turn.
 #[inline(always)]
 fn exp_polynomial<V: Real>(r: V) -> V {
-    const C: [f64; 12] = [
-        1.0,
-        1.0,
-        0.500_000_000_000_001_9,
-        0.166_666_666_666_666_8,
-        0.041_666_666_666_488_1,
-        0.008_333_333_333_319_601,
-        0.001_388_888_895_231_477_5,
-        0.000_198_412_698_900_471_13,
-        2.480_148_548_232_849_4e-5,
-        2.755_724_091_857_897e-6,
-        2.763_263_963_904_103e-7,
-        2.511_003_760_596_377_7e-8,
-    ];
-    let pair = |m: usize| r.mul_add(V::splat(C[2 * m + 1]), V::splat(C[2 * m]));
     let r2 = r * r;
     let r4 = r2 * r2;
-    let quad = |m: usize| pair(2 * m + 1).mul_add(r2, pair(2 * m));
-    quad(2).mul_add(r4, quad(1)).mul_add(r4, quad(0))
+    exp_quad(r, r2, 2)
+        .mul_add(r4, exp_quad(r, r2, 1))
+        .mul_add(r4, exp_quad(r, r2, 0))
+}
+
+/// The coefficients `c_n` of `e^r ≈ Σ c_n rⁿ` ([`exp_polynomial`]).
+const EXP_COEFFICIENTS: [f64; 12] = [
+    1.0,
+    1.0,
+    0.500_000_000_000_001_9,
+    0.166_666_666_666_666_8,
+    0.041_666_666_666_488_1,
+    0.008_333_333_333_319_601,
+    0.001_388_888_895_231_477_5,
+    0.000_198_412_698_900_471_13,
+    2.480_148_548_232_849_4e-5,
+    2.755_724_091_857_897e-6,
+    2.763_263_963_904_103e-7,
+    2.511_003_760_596_377_7e-8,
+];
+
+/// `(c_{4m} + c_{4m+1} r) + (c_{4m+2} + c_{4m+3} r) r²`. Functions rather than closures, so
+/// that they are always inlined into the SIMD tile bodies and the intrinsics under them too
+/// (closures are inlined at the compiler's discretion, which varied with unrelated changes).
+#[inline(always)]
+fn exp_quad<V: Real>(r: V, r2: V, m: usize) -> V {
+    exp_pair(r, 2 * m + 1).mul_add(r2, exp_pair(r, 2 * m))
+}
+
+/// `c_{2m} + c_{2m+1} r`.
+#[inline(always)]
+fn exp_pair<V: Real>(r: V, m: usize) -> V {
+    r.mul_add(
+        V::splat(EXP_COEFFICIENTS[2 * m + 1]),
+        V::splat(EXP_COEFFICIENTS[2 * m]),
+    )
 }
 
 #[cfg(test)]
@@ -184,6 +228,22 @@ mod tests {
     /// Arguments `0 … −700`, denser near 0.
     fn exponents() -> impl Iterator<Item = f64> {
         (0..200_000).map(|i| -700.0 * (i as f64 / 200_000.0).powi(2))
+    }
+
+    #[test]
+    fn near_pair_fraction_counts_the_pairs_within_the_cutoff() {
+        // Points 1 mm apart on a line; σ = 1, ε = e^{−3.125}: cutoff 2.5 mm, so pairs up to
+        // two apart are near: (n − 1) + (n − 2) of n(n − 1)/2.
+        let points: Vec<_> = (0..10)
+            .map(|i| crate::Vec3::new(i as f64, 0.0, 0.0))
+            .collect();
+        let kernel = GaussianKernel::new(1.0).unwrap();
+        assert_eq!(kernel.near_pair_fraction(&points), 1.0);
+        let truncated = kernel.truncated((-3.125f64).exp()).unwrap();
+        assert!((truncated.cutoff_radius() - 2.5).abs() < 1e-12);
+        let fraction = truncated.near_pair_fraction(&points);
+        assert!((fraction - 17.0 / 45.0).abs() < 1e-12, "{fraction}");
+        assert_eq!(truncated.near_pair_fraction(&points[..1]), 1.0);
     }
 
     #[test]
