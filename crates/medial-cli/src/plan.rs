@@ -530,7 +530,6 @@ pub fn automatic_plain(
             time_steps: AUTOMATIC.time_steps,
             kinetic_weight: PLAIN_KINETIC_WEIGHT,
             kernel_tolerance: kernel_tolerance(sigma, landmarks),
-            ..FlowConfig::default()
         },
         output: OutputConfig::default(),
         stages: vec![stage],
