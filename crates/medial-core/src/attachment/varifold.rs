@@ -59,10 +59,13 @@
 //! One [`PairSweep`](crate::flow::kernel) over the signed set of `F_S + F_T` faces gives every
 //! sum above: each unordered pair once, with one exponential (two for the oriented kind, whose
 //! `φ` is an exponential too), in parallel, and with a reduction in a fixed order, so that the
-//! result has the same bits for any number of threads. The sweep also passes over the pairs of
-//! target faces (whose sum `⟨T, T⟩` is constant): `(F_S + F_T)²/2` pairs instead of
-//! `F_S²/2 + F_S F_T`, a third more for surfaces of equal size; a target far denser than the
-//! model is better decimated first.
+//! result has the same bits for any number of threads. The sweep is bipartite: it leaves out
+//! the pairs of two target faces, whose sum `⟨T, T⟩` is constant and computed once, when the
+//! attachment is made (`F_S²/2 + F_S F_T` pairs instead of `(F_S + F_T)²/2`: on a target of
+//! four times the model's faces, 4.5 instead of 12.5 times `F_S²`). The target faces' own sums
+//! then hold their pairs with the source only, and
+//! `g = Σ_{a∈S} |n_a| (|n_a| + s_a) − Σ_{a∈T} |n_a| s_a + ⟨T, T⟩`, `s_a` the swept sum
+//! `Σ_b ε_b K_ab |n_b| φ(t_ab)` of face `a`.
 //!
 //! ## The width `σ_w`
 //!
@@ -207,7 +210,8 @@ impl Varifold {
             target: Vec::new(),
             target_norm2: 0.0,
         };
-        varifold.target_norm2 = varifold.sweep(&target_faces).value(&target_faces);
+        let sweep = PairSweep::new(&varifold.kernel, target_faces.len());
+        varifold.target_norm2 = varifold.sweep(sweep, &target_faces).value(&target_faces);
         varifold.target = target_faces;
         Ok(varifold)
     }
@@ -232,9 +236,8 @@ impl Varifold {
         self.target_norm2
     }
 
-    /// The sweep of the faces `faces` with the pair terms of the kind, run.
-    fn sweep(&self, faces: &[FaceNumbers]) -> Sweep {
-        let mut sweep = PairSweep::new(&self.kernel, faces.len());
+    /// `sweep` of the faces `faces` with the pair terms of the kind, run.
+    fn sweep(&self, mut sweep: PairSweep<7, 8>, faces: &[FaceNumbers]) -> Sweep {
         for (i, &f) in faces.iter().enumerate() {
             sweep.set_point(i, f);
         }
@@ -279,7 +282,8 @@ impl Attachment for Varifold {
             .collect();
         let mut faces: Vec<FaceNumbers> = source.iter().map(|f| f.numbers(1.0)).collect();
         faces.extend_from_slice(&self.target);
-        let sweep = self.sweep(&faces);
+        let pairs = PairSweep::bipartite(&self.kernel, source.len(), self.target.len());
+        let sweep = self.sweep(pairs, &faces);
         if let Some(grad) = grad {
             grad.fill(Vec3::zeros());
             let centre_factor = -4.0 / (self.width * self.width);
@@ -292,7 +296,7 @@ impl Attachment for Varifold {
             }
         }
         Ok(AttachmentValue {
-            value: sweep.value(&faces),
+            value: sweep.bipartite_value(&faces, source.len(), self.target_norm2),
             dice: None,
         })
     }
@@ -413,6 +417,19 @@ impl Sweep {
         (faces.iter().enumerate())
             .map(|(a, f)| f[AREA] * (f[AREA] + self.0.sums(a)[0]))
             .sum()
+    }
+
+    /// The same sum from a bipartite sweep whose faces `source..` are the target's, of
+    /// `⟨T, T⟩ = target_norm2`: `Σ_{a<source} ε_a|n_a| (ε_a|n_a| + s_a) + Σ_{a≥source}
+    /// ε_a|n_a| s_a + ⟨T, T⟩`, in face order.
+    fn bipartite_value(&self, faces: &[FaceNumbers], source: usize, target_norm2: f64) -> f64 {
+        let swept: f64 = (faces.iter().enumerate())
+            .map(|(a, f)| {
+                let own = if a < source { f[AREA] } else { 0.0 };
+                f[AREA] * (own + self.0.sums(a)[0])
+            })
+            .sum();
+        swept + target_norm2
     }
 }
 

@@ -108,14 +108,37 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
     /// A sweep of `kernel` (exact or truncated, by its tolerance) over `landmarks` points, all
     /// at the origin with zero numbers.
     pub(crate) fn new(kernel: &GaussianKernel, landmarks: usize) -> Self {
-        let layout = Layout::exact(landmarks);
+        Self::with_layout(
+            kernel.half_inv_sigma2,
+            kernel.cutoff_radius(),
+            Layout::exact(landmarks),
+        )
+    }
+
+    /// An exact sweep (whatever `kernel`'s tolerance) over `free + fixed` points that skips the
+    /// pairs of two fixed points: points `0..free` are free, `free..free + fixed` fixed, and
+    /// `S(i)` sums over the other free points and, for a free `i`, over the fixed ones too
+    /// (for a fixed `i`, over the free ones only). For attachments whose target–target sum is
+    /// a constant: the free points' slots are padded to a whole number of blocks, and the
+    /// tiles of two fixed blocks are left out.
+    pub(crate) fn bipartite(kernel: &GaussianKernel, free: usize, fixed: usize) -> Self {
+        let layout = Layout::bipartite(free, fixed);
+        Self::with_layout(kernel.half_inv_sigma2, f64::INFINITY, layout)
+    }
+
+    /// A sweep over the points of `layout`, all at the origin with zero numbers, its other
+    /// slots padding.
+    fn with_layout(scale: f64, cutoff: f64, layout: Layout) -> Self {
+        let landmarks = layout.slot.len();
         let mut points = vec![0.0; layout.padded * F];
-        for s in landmarks..layout.padded {
+        let mut used = vec![false; layout.padded];
+        layout.slot.iter().for_each(|&s| used[s] = true);
+        for s in (0..layout.padded).filter(|&s| !used[s]) {
             points[chunked(s, F)] = PADDING_DISTANCE;
         }
         Self {
-            scale: kernel.half_inv_sigma2,
-            cutoff: kernel.cutoff_radius(),
+            scale,
+            cutoff,
             staged: vec![[0.0; F]; landmarks],
             order: (0..landmarks).collect(),
             sums: vec![0.0; layout.padded * C],
@@ -263,11 +286,24 @@ impl Layout {
     /// in [`BLOCK_RANGE`]), and every tile.
     fn exact(landmarks: usize) -> Self {
         let padded = landmarks.div_ceil(LANES) * LANES;
-        let block = (padded / 16)
-            .next_power_of_two()
-            .clamp(BLOCK_RANGE.0, BLOCK_RANGE.1);
+        let block = exact_block(padded);
         let slot = (0..landmarks).collect();
         let tiles = upper_tiles(padded.div_ceil(block)).collect();
+        Self::with_tiles(slot, padded, block, tiles, Vec::new())
+    }
+
+    /// The free points `0..free` in the first slots, padded to a whole number of blocks (the
+    /// block as [`Layout::exact`] chooses it for all the points), then the fixed ones; every
+    /// tile but those of two fixed blocks.
+    fn bipartite(free: usize, fixed: usize) -> Self {
+        let block = exact_block((free + fixed).div_ceil(LANES) * LANES);
+        let free_blocks = free.div_ceil(block);
+        let first_fixed = free_blocks * block;
+        let padded = first_fixed + fixed.div_ceil(LANES) * LANES;
+        let slot = (0..free).chain(first_fixed..first_fixed + fixed).collect();
+        let tiles = upper_tiles(padded.div_ceil(block))
+            .filter(|&(bi, _)| bi < free_blocks)
+            .collect();
         Self::with_tiles(slot, padded, block, tiles, Vec::new())
     }
 
@@ -368,6 +404,14 @@ impl Layout {
     fn range(&self, b: usize) -> Range<usize> {
         b * self.block..((b + 1) * self.block).min(self.padded)
     }
+}
+
+/// The rows of a block of an exact sweep over `padded` slots: about a sixteenth of them, a
+/// power of two in [`BLOCK_RANGE`].
+fn exact_block(padded: usize) -> usize {
+    (padded / 16)
+        .next_power_of_two()
+        .clamp(BLOCK_RANGE.0, BLOCK_RANGE.1)
 }
 
 /// The Z-order (Morton) code of the cell of side `cell` holding `p`, cells counted from `lo`
@@ -692,10 +736,20 @@ mod tests {
     /// `Σ_j (4|x_ij| + 32) ε |K_ij t(i, j)|` with `x_ij = −r²/(2σ²)`, as the exponential
     /// amplifies the rounding of its argument to a relative error of about `|x| ε`.
     fn direct_sums(points: &[(Vec3, f64)], sigma: f64) -> Vec<[(f64, f64); 2]> {
+        direct_sums_but_fixed(points, sigma, points.len())
+    }
+
+    /// [`direct_sums`] without the pairs of two points `≥ fixed`.
+    fn direct_sums_but_fixed(
+        points: &[(Vec3, f64)],
+        sigma: f64,
+        fixed: usize,
+    ) -> Vec<[(f64, f64); 2]> {
         let e = Vec3::new(1.0, 2.0, -0.5);
         let mut out = vec![[(0.0, 0.0); 2]; points.len()];
         for (i, (qi, _)) in points.iter().enumerate() {
-            for (_, (qj, wj)) in points.iter().enumerate().filter(|&(j, _)| j != i) {
+            let other = |&(j, _): &(usize, _)| j != i && (i < fixed || j < fixed);
+            for (_, (qj, wj)) in points.iter().enumerate().filter(other) {
                 let x = -(qi - qj).norm_squared() / (2.0 * sigma * sigma);
                 let k = x.exp();
                 for (s, t) in out[i].iter_mut().zip([*wj, e.dot(&(qi - qj))]) {
@@ -883,6 +937,35 @@ mod tests {
             for isa in Isa::ALL.into_iter().filter(|isa| isa.is_supported()) {
                 let (sums, _) = swept_sums(&points, sigma, 0.0, isa);
                 for (i, (s, d)) in sums.iter().zip(&direct).enumerate() {
+                    for c in 0..2 {
+                        let (exact, tol) = d[c];
+                        prop_assert!(
+                            (s[c] - exact).abs() <= tol + 1e-300,
+                            "{isa:?}, point {i}, sum {c}: {} vs {exact}", s[c]
+                        );
+                    }
+                }
+            }
+        }
+
+        /// A bipartite sweep sums over every pair but those of two fixed points, on every ISA.
+        #[test]
+        fn bipartite_sums_match_direct_sums_without_fixed_pairs(
+            seed in 0u64..1000,
+            free in 1usize..300,
+            fixed in 1usize..300,
+        ) {
+            let points = random_points(seed, free + fixed);
+            let direct = direct_sums_but_fixed(&points, 1.5, free);
+            let kernel = GaussianKernel::new(1.5).unwrap();
+            for isa in Isa::ALL.into_iter().filter(|isa| isa.is_supported()) {
+                let mut sweep = PairSweep::<4, 2>::bipartite(&kernel, free, fixed);
+                for (i, (q, w)) in points.iter().enumerate() {
+                    sweep.set_point(i, [q.x, q.y, q.z, *w]);
+                }
+                sweep.run_with(&TestTerms, isa);
+                for (i, d) in direct.iter().enumerate() {
+                    let s = sweep.sums(i);
                     for c in 0..2 {
                         let (exact, tol) = d[c];
                         prop_assert!(
