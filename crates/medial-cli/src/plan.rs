@@ -540,3 +540,24 @@ fn mean(values: impl Iterator<Item = f64>) -> f64 {
     let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
     sum / n.max(1) as f64
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Points 1 mm apart along a line.
+    fn line(n: usize) -> Vec<Vec3> {
+        (0..n).map(|i| Vec3::new(i as f64, 0.0, 0.0)).collect()
+    }
+
+    #[test]
+    fn the_kernel_is_truncated_only_where_few_pairs_are_near() {
+        // σ = 1 mm: the cutoff is 6.8 mm, so on a line of 100 the pairs up to 6 apart are near
+        // (579 of 4,950, 12 %), on a line of 8 every pair.
+        assert_eq!(kernel_tolerance(1.0, &line(100)), KERNEL_TOLERANCE);
+        assert_eq!(kernel_tolerance(1.0, &line(8)), 0.0);
+        // A width too wide for any pair to be far, and one that is not a width at all.
+        assert_eq!(kernel_tolerance(100.0, &line(100)), 0.0);
+        assert_eq!(kernel_tolerance(f64::NAN, &line(100)), 0.0);
+    }
+}
