@@ -76,9 +76,11 @@ fn a_template_of_the_synthetic_cup_meets_the_targets() {
     let atoms = figures["atoms"].as_u64().unwrap();
     assert!((80..=200).contains(&atoms), "{atoms} atoms for --atoms 100");
     let [thin, thick] = [0, 1].map(|i| f(&figures["thickness_mm"][i]));
-    // The cup's wall is 4–8 mm thick (crates/medial-core/src/synth).
+    // The cup's wall is 4–8 mm thick (crates/medial-core/src/synth); the free edge of the
+    // rasterized cut rim, a wedge whose medial axis thins to its tip, comes out thinner
+    // (2.8 mm measured with --atoms 100).
     assert!(
-        thin > 3.0 && thick < 9.0 && thin < thick,
+        thin > 2.0 && thick < 9.0 && thin < thick,
         "{thin}–{thick} mm"
     );
 
@@ -105,6 +107,33 @@ fn a_template_of_the_synthetic_cup_meets_the_targets() {
     // The sheet is written too, with its radius.
     let sheet = medial_io::sheet::read_sheet(&sheet, "Radius").expect("a medial sheet");
     assert!(sheet.radius().iter().all(|&r| r > 0.0));
+}
+
+#[test]
+fn the_seam_of_the_toy_is_found_and_the_toy_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let case = dir.path().join("toy");
+    run_json(&["synth", "toy", "--out", s(&case), "-q"]);
+    let mask = dir.path().join("toy.nii.gz");
+    run_json(&[
+        "rasterize",
+        s(&case.join("template.vtk")),
+        "--spacing",
+        "0.5",
+        "--out",
+        s(&mask),
+        "-q",
+    ]);
+    let out = dir.path().join("t.vtk");
+    // Three sheets meeting at one seam, from the segmentation and from the mesh itself.
+    for shape in [mask, case.join("template.vtk")] {
+        one_line_error(
+            &["template", s(&shape), "--out", s(&out)],
+            1,
+            &["3 sheets meeting at 1 seam", "single-sheet"],
+        );
+    }
+    assert!(!out.exists());
 }
 
 #[test]

@@ -41,6 +41,17 @@ pub enum Error {
     /// did not converge).
     #[error("not invertible: {0}")]
     NotInvertible(String),
+    /// A shape whose medial axis branches (sheets meeting at seams) where one sheet is needed.
+    #[error(
+        "the shape's medial axis branches: {sheets} sheets meeting at {seams} seam(s); only \
+         single-sheet templates are built"
+    )]
+    Branching {
+        /// Sheets found.
+        sheets: usize,
+        /// Seams found (lines where three or more sheets meet).
+        seams: usize,
+    },
     /// The optimiser failed (not merely stopped early).
     #[error("optimisation failed: {0}")]
     Optimisation(String),

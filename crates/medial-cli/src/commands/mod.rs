@@ -97,7 +97,7 @@ pub enum Command {
     /// twist + bend + affine deformation, the affine part, and ready configs.
     Synth(synth::SynthArgs),
     /// Build a medial template from a shape (a segmentation or a closed mesh): its medial sheet
-    /// (exact distance transform, ridge, a regular ring disc with a radius per vertex), one Loop
+    /// (exact distance transform, ridge, a triangular lattice with a radius per vertex), one Loop
     /// subdivision, inflation, projection, the automatic Dice fit to the shape itself and
     /// projection again; writes TEMPLATE.vtk and its figures as JSON (printed too).
     Template(template::TemplateArgs),

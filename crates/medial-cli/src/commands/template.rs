@@ -3,7 +3,8 @@
 //! 1. the shape as a mask on a grid fine enough for its thinnest wall (a third of the 10th
 //!    percentile of the half thicknesses found on a first, coarser grid);
 //! 2. its medial sheet with a radius per vertex ([`sheet_of_mask`]: exact distance and feature
-//!    transform, wide-angle ridge points, a chart, a regular ring disc);
+//!    transform, wide-angle ridge points, sheets and seams (a branching shape is refused), a
+//!    chart, a harmonic map of its region onto a triangular-lattice hexagon);
 //! 3. one Loop subdivision, inflation and projection onto the medial constraints;
 //! 4. the automatic constrained Dice fit of that template to the mask itself (`medial fit`'s
 //!    own schedule, run in process), then projection again, so that the template matches its
@@ -61,7 +62,8 @@ pub struct TemplateArgs {
     /// The shape: a binary segmentation (.nii, .nii.gz, .exr; foreground = value > 0 or
     /// --label; a graded signed image, a level set, is cut at 0 on the fine grid) or a closed
     /// triangle mesh (.vtk, .obj, .gltf, .glb), world coordinates in mm.
-    /// One sheet shaped as a disc or a bowl (heart wall, placenta, leaflet).
+    /// One sheet: a disc, a bowl or a strip (heart wall, placenta, leaflet, cmrep's t001);
+    /// a shape whose sheets meet at seams is refused with its sheet and seam counts.
     #[arg(value_name = "SHAPE")]
     pub shape: PathBuf,
     /// The template to write (cmrep boundary template, legacy VTK).
@@ -197,7 +199,11 @@ struct TemplateFigures {
     medial_points: usize,
     /// The chart the sheet was sampled in: sphere (a bowl) or plane.
     chart: ChartKind,
+    /// Rows of the sheet's lattice hexagon either side of its middle row, and how many edges
+    /// it is stretched by along it (0: regular, a round sheet).
     rings: usize,
+    stretch: usize,
+    /// Sheets and seams of the medial points (a branching shape is refused).
     sheets: usize,
     seams: usize,
     /// Voxel Dice of the template against the shape on the fine grid.
@@ -481,8 +487,9 @@ fn figures_of(
         medial_points: found.medial_points.len(),
         chart: found.chart.kind,
         rings: found.rings,
-        sheets: 1,
-        seams: 0,
+        stretch: found.stretch,
+        sheets: found.branching.sheets,
+        seams: found.branching.seams,
         dice,
         dice_input_grid,
         meets_targets,

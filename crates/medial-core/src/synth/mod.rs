@@ -39,6 +39,5 @@ pub use shape::{
     Shape, CUP_EQUATOR, CUP_LENGTH, CUP_OPENING, CUP_RADIUS_APEX, CUP_RADIUS_BASE,
     CUP_RADIUS_SEPTUM, CUP_RINGS, TOY_CELLS, TOY_CURL, TOY_LENGTH, TOY_RADIUS, TOY_WIDTH,
 };
-pub(crate) use sheets::hex_disc;
 pub use sheets::{parameter_grid, ParameterGrid};
 pub use warp::Warp;

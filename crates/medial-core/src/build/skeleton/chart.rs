@@ -109,6 +109,37 @@ impl Chart {
     }
 }
 
+impl Chart {
+    /// The angle `θ = |q|/R` from the pole of chart coordinates `q` (radians; 0 on a plane):
+    /// the chart stretches lengths across its rays by `θ/sin θ` there.
+    pub fn angle(&self, q: [f64; 2]) -> f64 {
+        match self.kind {
+            ChartKind::Plane => 0.0,
+            ChartKind::Sphere => q[0].hypot(q[1]) / self.radius,
+        }
+    }
+
+    /// The point of the chart's surface (sphere or plane) at chart coordinates `q` (mm): the
+    /// inverse of [`Chart::coords`] on it, `c + R (cos θ a + sin θ (q₁e₁ + q₂e₂)/|q|)` with
+    /// `θ = |q|/R` for a sphere.
+    pub fn on_surface(&self, q: [f64; 2]) -> Vec3 {
+        let [e1, e2] = self.axes;
+        match self.kind {
+            ChartKind::Plane => self.centre + q[0] * e1 + q[1] * e2,
+            ChartKind::Sphere => {
+                let r = q[0].hypot(q[1]);
+                let theta = r / self.radius;
+                let along = if r > 0.0 {
+                    (q[0] * e1 + q[1] * e2) / r
+                } else {
+                    e1
+                };
+                self.centre + self.radius * (theta.cos() * self.pole + theta.sin() * along)
+            }
+        }
+    }
+}
+
 /// The least-squares sphere through `points` (centre, radius), solving the normal equations of
 /// `|p − o|² = 2 c'·(p − o) + k` about `o` for `c'`, `k`; `None` when they are singular.
 fn fit_sphere(points: &[Vec3], origin: Vec3) -> Option<(Vec3, f64)> {
@@ -150,6 +181,10 @@ mod tests {
         let pole_point = c + r * chart.pole;
         let q = chart.coords(&pole_point);
         assert!(q[0].hypot(q[1]) < 1e-9);
+        // on_surface inverts coords on the sphere.
+        for p in &points[1..] {
+            assert!((chart.on_surface(chart.coords(p)) - p).norm() < 1e-9, "{p}");
+        }
     }
 
     #[test]
@@ -159,7 +194,9 @@ mod tests {
             .collect();
         let chart = Chart::fit(&points).unwrap();
         assert_eq!(chart.kind, ChartKind::Plane);
-        let q = chart.coords(&Vec3::new(9.0, 9.0, 0.0));
+        let p = Vec3::new(9.0, 9.0, 0.0);
+        let q = chart.coords(&p);
         assert!((q[0].hypot(q[1]) - 4.5 * 2f64.sqrt()).abs() < 1e-9);
+        assert!((chart.on_surface(q) - p).norm() < 1e-9);
     }
 }

@@ -1,23 +1,20 @@
-//! A regularly sampled, triangulated medial sheet through a cloud of medial points: a disc of
-//! rings in the chart, stretched to the cloud's outline, each vertex placed by a local linear
-//! fit of the points around it.
+//! A regularly sampled, triangulated medial sheet through a cloud of medial points: a
+//! [`Lattice`] hexagon mapped into the chart, each vertex placed by a local linear fit of the
+//! points around it.
 
 use nalgebra::{Matrix3, Vector3};
 use std::collections::HashMap;
-use std::f64::consts::TAU;
 
 use super::chart::Chart;
+use super::lattice::Lattice;
 use super::ridge::MedialPoint;
 use crate::build::inflate::MedialSheet;
-use crate::synth::hex_disc;
 use crate::{Error, Result, Vec3};
 
-/// Angular bins of the outline `R(φ)` of the cloud in the chart.
-const OUTLINE_BINS: usize = 72;
-/// The outline in a bin is this quantile of the chart radii in it (ignores stray points).
-const OUTLINE_QUANTILE: f64 = 0.95;
 /// Fewest points a vertex's window must hold for a linear fit.
 const MIN_POINTS: usize = 8;
+/// A window with fewer points (at a sparse tip of the sheet) is doubled up to this many times.
+const WINDOW_DOUBLINGS: u32 = 2;
 
 /// A point whose radius is below this fraction of the [`REFERENCE_QUANTILE`] of the radii
 /// around it is a spur and is dropped.
@@ -70,75 +67,46 @@ impl ChartedCloud {
         self.points.len()
     }
 
-    /// The outline `R(φ)` of the cloud about the chart centre: [`OUTLINE_QUANTILE`] of `|q|` in
-    /// each of [`OUTLINE_BINS`] angular bins, smoothed by a circular mean over three bins.
-    ///
-    /// Errors: `InvalidVolume` when a bin is empty (the sheet does not surround the chart's
-    /// centre: it is not a disc or a bowl seen from its apex).
-    pub(super) fn outline(&self) -> Result<Vec<f64>> {
-        let mut bins: Vec<Vec<f64>> = vec![Vec::new(); OUTLINE_BINS];
-        for q in &self.coords {
-            let phi = q[1].atan2(q[0]).rem_euclid(TAU);
-            let b = ((phi / TAU * OUTLINE_BINS as f64) as usize).min(OUTLINE_BINS - 1);
-            bins[b].push(q[0].hypot(q[1]));
-        }
-        let raw = bins
-            .iter_mut()
-            .enumerate()
-            .map(|(b, radii)| {
-                if radii.is_empty() {
-                    return Err(Error::InvalidVolume(format!(
-                        "the medial sheet does not surround its centre (no medial points \
-                         towards {:.0}° in its chart): only disc- or bowl-shaped single sheets \
-                         are built",
-                        (b as f64 + 0.5) * 360.0 / OUTLINE_BINS as f64
-                    )));
-                }
-                radii.sort_by(f64::total_cmp);
-                Ok(radii[((radii.len() - 1) as f64 * OUTLINE_QUANTILE) as usize])
-            })
-            .collect::<Result<Vec<f64>>>()?;
-        let n = raw.len();
-        Ok((0..n)
-            .map(|b| (raw[(b + n - 1) % n] + raw[b] + raw[(b + 1) % n]) / 3.0)
-            .collect())
+    /// The points.
+    pub(super) fn points(&self) -> &[MedialPoint] {
+        &self.points
+    }
+
+    /// The points' chart coordinates (mm).
+    pub(super) fn coords(&self) -> &[[f64; 2]] {
+        &self.coords
     }
 }
 
-/// `R(φ)` interpolated linearly between bin centres.
-fn outline_at(outline: &[f64], phi: f64) -> f64 {
-    let n = outline.len();
-    let x = phi.rem_euclid(TAU) / TAU * n as f64 - 0.5;
-    let b = x.floor();
-    let t = x - b;
-    let b = (b as i64).rem_euclid(n as i64) as usize;
-    (1.0 - t) * outline[b] + t * outline[(b + 1) % n]
-}
-
-/// The sheet: [`hex_disc`]`(rings)` with the disc point `(s, φ)` at chart position
-/// `s R(φ) (cos φ, sin φ)`, its position and radius the values at that point of the weighted
-/// local linear fit `v(q) ≈ v₀ + B (q − q₀)` to the medial points within `window` mm
-/// (weights `exp(−|q − q₀|²/(2 (window/2)²))`, then a second pass down-weighting points off
-/// the first fit by `1/(1 + (d/2h)²)`, `h` = `voxel`), which is unbiased at the rim where the
-/// window is one-sided.
+/// The sheet on `lattice`: each lattice point at its chart position `chart[k]` (the harmonic
+/// map of [`Region::map_onto`](super::region::Region::map_onto)), its position and radius the
+/// values there of the weighted local linear fit `v(q) ≈ v₀ + B (q − q₀)` to the medial
+/// points within `window` mm (doubled up to [`WINDOW_DOUBLINGS`] times where it holds fewer
+/// than [`MIN_POINTS`]; weights `exp(−|q − q₀|²/(2 (window/2)²))`, then a second pass
+/// down-weighting points off the first fit by `1/(1 + (d/2h)²)`, `h` = `voxel`), which is
+/// unbiased at the rim where the window is one-sided.
 ///
-/// Errors: `InvalidVolume` when a vertex has fewer than [`MIN_POINTS`] points in its window
-/// (a hole in the sheet); those of [`MedialSheet::new`].
-pub(super) fn disc_sheet(
+/// Errors: `InvalidVolume` when a point has fewer than [`MIN_POINTS`] points in its widest
+/// window (a hole in the sheet); those of [`MedialSheet::new`].
+pub(super) fn lattice_sheet(
     cloud: &ChartedCloud,
-    outline: &[f64],
-    rings: usize,
+    lattice: &Lattice,
+    chart: &[[f64; 2]],
     window: f64,
     voxel: f64,
 ) -> Result<MedialSheet> {
-    let (params, triangles) = hex_disc(rings);
-    let buckets = Buckets::new(&cloud.coords, window);
-    let mut points = Vec::with_capacity(params.len());
-    let mut radius = Vec::with_capacity(params.len());
-    for &[s, phi] in &params {
-        let r = s * outline_at(outline, phi);
-        let q0 = [r * phi.cos(), r * phi.sin()];
-        let near = buckets.within(&cloud.coords, q0, window);
+    let widest = window * f64::from(1u32 << WINDOW_DOUBLINGS);
+    let buckets = Buckets::new(&cloud.coords, widest);
+    let mut points = Vec::with_capacity(chart.len());
+    let mut radius = Vec::with_capacity(chart.len());
+    for &q0 in chart {
+        let (near, window) = (0..=WINDOW_DOUBLINGS)
+            .map(|d| {
+                let w = window * f64::from(1u32 << d);
+                (buckets.within(&cloud.coords, q0, w), w)
+            })
+            .find(|(near, w)| near.len() >= MIN_POINTS || *w >= widest)
+            .expect("the widest window ends the search");
         if near.len() < MIN_POINTS {
             return Err(Error::InvalidVolume(format!(
                 "the medial sheet has a hole near chart position ({:.1}, {:.1}) mm ({} medial \
@@ -152,11 +120,11 @@ pub(super) fn disc_sheet(
         points.push(p);
         radius.push(rad);
     }
-    MedialSheet::new(points, triangles, radius)
+    MedialSheet::new(points, lattice.triangles.clone(), radius)
 }
 
 /// The value at `q0` of the weighted local linear fit of position and radius (see
-/// [`disc_sheet`]).
+/// [`lattice_sheet`]).
 fn local_fit(
     cloud: &ChartedCloud,
     near: &[usize],

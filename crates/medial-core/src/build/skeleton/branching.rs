@@ -1,0 +1,232 @@
+//! How many sheets a shape's medial points form and how many seams join them: a seam is where
+//! three sheets meet (the paper's toy), found as the medial points about which the cloud is not
+//! flat.
+
+use nalgebra::Matrix3;
+use rayon::prelude::*;
+use std::collections::{HashMap, HashSet};
+
+use super::ridge::MedialPoint;
+use crate::build::inflate::UnionFind;
+use crate::Vec3;
+
+/// Radius of the ball about a medial point whose points decide whether it is on a seam, voxels.
+const BALL_VOXELS: f64 = 4.0;
+/// A point is on a seam where the smallest eigenvalue of the covariance of the points in its
+/// ball is at least this fraction of their trace: about 0 on a sheet (flat on the scale of the
+/// ball), 1/4 on a straight seam of three half-discs at 120°.
+const SEAM_FLATNESS: f64 = 0.1;
+/// Fewest points in a ball for its covariance to count.
+const MIN_BALL_POINTS: usize = 10;
+/// A piece of sheet counts when it holds at least this fraction of the medial points (smaller
+/// ones are spurs of boundary bumps, cut off where they join the sheet).
+const MIN_SHEET_FRACTION: f64 = 0.05;
+
+/// The sheets and seams of a cloud of medial points ([`branching`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct Branching {
+    /// Sheets: pieces of the cloud off the seams, those joined across a fold (a non-flat line
+    /// between two pieces only) counted once.
+    pub sheets: usize,
+    /// Seams: connected lines of non-flat points that three or more sheets meet.
+    pub seams: usize,
+    /// Medial points on seams.
+    pub seam_points: usize,
+}
+
+/// The [`Branching`] of the medial points `points` of a mask of mean voxel `voxel` (mm).
+///
+/// 1. A point is on a seam when the points within `r = 4·voxel` of it are not flat: the
+///    smallest eigenvalue of their covariance is at least 0.1 of the trace (`SEAM_FLATNESS`).
+/// 2. The seam points form seams (pieces by 26-neighbouring cells of `r`) and the other
+///    points, less those within `r` of a seam, form pieces of sheet (cells of 1.5 voxels, as
+///    [`medial_points`](super::medial_points) joins points); pieces with fewer than
+///    5 % of the points (`MIN_SHEET_FRACTION`) are spurs and are dropped.
+/// 3. A seam that at least three pieces reach (a point within `2r` of it) is a seam; the pieces
+///    on either side of one that fewer reach are one sheet.
+pub fn branching(points: &[MedialPoint], voxel: f64) -> Branching {
+    let r = BALL_VOXELS * voxel;
+    let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
+    let grid = Grid::new(&positions, r);
+    let on_seam: Vec<bool> = (0..positions.len())
+        .into_par_iter()
+        .map(|i| {
+            let near = grid.within(&positions, positions[i], r);
+            near.len() >= MIN_BALL_POINTS && !flat(&positions, &near)
+        })
+        .collect();
+    let seam_points: Vec<usize> = (0..positions.len()).filter(|&i| on_seam[i]).collect();
+    let seam_positions: Vec<Vec3> = seam_points.iter().map(|&i| positions[i]).collect();
+    // Cells of `r`: a seam's points, thinned where it crosses the voxels obliquely, stay one.
+    let seam_piece = pieces(&seam_positions, r);
+    let seam_grid = Grid::new(&seam_positions, 2.0 * r);
+    let sheet_points: Vec<usize> = (0..positions.len())
+        .filter(|&i| {
+            seam_grid
+                .within(&seam_positions, positions[i], r)
+                .is_empty()
+        })
+        .collect();
+    let sheet_positions: Vec<Vec3> = sheet_points.iter().map(|&i| positions[i]).collect();
+    let sheet_piece = pieces(&sheet_positions, 1.5 * voxel);
+    let mut size: HashMap<usize, usize> = HashMap::new();
+    for &p in &sheet_piece {
+        *size.entry(p).or_default() += 1;
+    }
+    let least = MIN_SHEET_FRACTION * positions.len() as f64;
+    let kept: Vec<usize> = {
+        let mut kept: Vec<usize> = (size.iter())
+            .filter(|&(_, &n)| n as f64 >= least)
+            .map(|(&p, _)| p)
+            .collect();
+        kept.sort_unstable();
+        kept
+    };
+    // Which kept pieces reach each seam.
+    let mut reach: HashMap<usize, HashSet<usize>> = HashMap::new();
+    for (k, &p) in sheet_piece.iter().enumerate() {
+        if !kept.contains(&p) {
+            continue;
+        }
+        if let Some(&s) = seam_grid
+            .within(&seam_positions, sheet_positions[k], 2.0 * r)
+            .first()
+        {
+            reach.entry(seam_piece[s]).or_default().insert(p);
+        }
+    }
+    let slot = |p: usize| kept.binary_search(&p).expect("a kept piece");
+    let mut sheets = UnionFind::new(kept.len());
+    let mut seams = 0;
+    for pieces in reach.values() {
+        let pieces: Vec<usize> = pieces.iter().map(|&p| slot(p)).collect();
+        if pieces.len() >= 3 {
+            seams += 1;
+        } else if let [a, b] = pieces[..] {
+            sheets.union(a, b);
+        }
+    }
+    let roots: HashSet<usize> = (0..kept.len()).map(|k| sheets.find(k)).collect();
+    Branching {
+        sheets: roots.len(),
+        seams,
+        seam_points: seam_points.len(),
+    }
+}
+
+/// Whether the points `near` of `positions` are flat: the smallest eigenvalue of their
+/// covariance below [`SEAM_FLATNESS`] of its trace.
+fn flat(positions: &[Vec3], near: &[usize]) -> bool {
+    let n = near.len() as f64;
+    let mean = near.iter().map(|&k| positions[k]).sum::<Vec3>() / n;
+    let covariance = near
+        .iter()
+        .map(|&k| {
+            let d = positions[k] - mean;
+            d * d.transpose()
+        })
+        .sum::<Matrix3<f64>>()
+        / n;
+    let eigen = covariance.symmetric_eigenvalues();
+    let smallest = eigen.min();
+    smallest < SEAM_FLATNESS * eigen.sum()
+}
+
+/// A label per point: the pieces of `positions` joined where their cells of size `cell` touch
+/// (26-neighbourhood).
+fn pieces(positions: &[Vec3], cell: f64) -> Vec<usize> {
+    let key = |p: &Vec3| p.map(|c| (c / cell).floor() as i64);
+    let mut cells: HashMap<[i64; 3], usize> = HashMap::new();
+    let cell_of: Vec<usize> = (positions.iter())
+        .map(|p| {
+            let k = key(p);
+            let next = cells.len();
+            *cells.entry([k.x, k.y, k.z]).or_insert(next)
+        })
+        .collect();
+    let mut uf = UnionFind::new(cells.len());
+    for (k, &c) in &cells {
+        for d in 0..27 {
+            let o = [d % 3, (d / 3) % 3, d / 9].map(|o| o as i64 - 1);
+            if let Some(&other) = cells.get(&[k[0] + o[0], k[1] + o[1], k[2] + o[2]]) {
+                uf.union(c, other);
+            }
+        }
+    }
+    cell_of.iter().map(|&c| uf.find(c)).collect()
+}
+
+/// Points bucketed in cubic cells of a given size.
+struct Grid {
+    cell: f64,
+    cells: HashMap<[i64; 3], Vec<usize>>,
+}
+
+impl Grid {
+    fn new(positions: &[Vec3], cell: f64) -> Self {
+        let mut cells: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+        for (i, p) in positions.iter().enumerate() {
+            cells.entry(Self::key(p, cell)).or_default().push(i);
+        }
+        Self { cell, cells }
+    }
+
+    fn key(p: &Vec3, cell: f64) -> [i64; 3] {
+        [p.x, p.y, p.z].map(|c| (c / cell).floor() as i64)
+    }
+
+    /// The points within `radius ≤ cell` of `q`, ascending.
+    fn within(&self, positions: &[Vec3], q: Vec3, radius: f64) -> Vec<usize> {
+        let k = Self::key(&q, self.cell);
+        let mut found: Vec<usize> = (0..27)
+            .filter_map(|d| {
+                let o = [d % 3, (d / 3) % 3, d / 9].map(|o| o as i64 - 1);
+                self.cells.get(&[k[0] + o[0], k[1] + o[1], k[2] + o[2]])
+            })
+            .flatten()
+            .copied()
+            .filter(|&i| (positions[i] - q).norm() <= radius)
+            .collect();
+        found.sort_unstable();
+        found
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Points on a 0.5 mm grid of the half-planes `{w·u + z·e_z : 0 ≤ w ≤ 12, |z| ≤ 8}` for
+    /// the directions `u` at the given angles (degrees).
+    fn fins(angles: &[f64]) -> Vec<MedialPoint> {
+        let mut points = Vec::new();
+        for &a in angles {
+            let u = Vec3::new(a.to_radians().cos(), a.to_radians().sin(), 0.0);
+            for i in 0..=24 {
+                for j in -16..=16 {
+                    let p = 0.5 * i as f64 * u + Vec3::new(0.0, 0.0, 0.5 * j as f64);
+                    if i > 0 || a == angles[0] {
+                        points.push(MedialPoint {
+                            position: p,
+                            radius: 1.0,
+                        });
+                    }
+                }
+            }
+        }
+        points
+    }
+
+    #[test]
+    fn three_fins_meet_at_one_seam_and_a_folded_sheet_is_one_sheet() {
+        let toy = branching(&fins(&[90.0, 210.0, 330.0]), 0.5);
+        assert_eq!((toy.sheets, toy.seams), (3, 1), "{toy:?}");
+        assert!(toy.seam_points > 0);
+        // Two fins at 120°: one sheet folded along a line, not a seam.
+        let fold = branching(&fins(&[90.0, 210.0]), 0.5);
+        assert_eq!((fold.sheets, fold.seams), (1, 0), "{fold:?}");
+        // A flat sheet: no seam points at all.
+        let flat = branching(&fins(&[0.0, 180.0]), 0.5);
+        assert_eq!((flat.sheets, flat.seams, flat.seam_points), (1, 0, 0));
+    }
+}
