@@ -43,8 +43,9 @@ pub enum Error {
     NotInvertible(String),
     /// A shape whose medial axis branches (sheets meeting at seams) where one sheet is needed.
     #[error(
-        "the shape's medial axis branches: {sheets} sheets meeting at {seams} seam(s); only \
-         single-sheet templates are built"
+        "the shape's medial axis branches: {sheets} sheets meeting at {seams} seam{}; only \
+         single-sheet templates are built",
+        if *seams == 1 { "" } else { "s" }
     )]
     Branching {
         /// Sheets found.
