@@ -16,9 +16,15 @@ use std::path::{Path, PathBuf};
 
 /// The synthetic cup's template rasterized with 0.5 mm voxels, written into `dir`.
 fn cup_mask(dir: &Path) -> PathBuf {
-    let case = dir.join("case");
-    run_json(&["synth", "cup", "--out", s(&case), "-q"]);
-    let mask = dir.join("cup.nii.gz");
+    synth_mask(dir, "cup").1
+}
+
+/// `medial synth SHAPE` into `dir/SHAPE` and its template rasterized with 0.5 mm voxels into
+/// `dir/SHAPE.nii.gz`: the case folder and the mask.
+fn synth_mask(dir: &Path, shape: &str) -> (PathBuf, PathBuf) {
+    let case = dir.join(shape);
+    run_json(&["synth", shape, "--out", s(&case), "-q"]);
+    let mask = dir.join(format!("{shape}.nii.gz"));
     run_json(&[
         "rasterize",
         s(&case.join("template.vtk")),
@@ -28,7 +34,7 @@ fn cup_mask(dir: &Path) -> PathBuf {
         s(&mask),
         "-q",
     ]);
-    mask
+    (case, mask)
 }
 
 /// The figures' targets (issue 10) hold.
@@ -112,18 +118,7 @@ fn a_template_of_the_synthetic_cup_meets_the_targets() {
 #[test]
 fn the_seam_of_the_toy_is_found_and_the_toy_refused() {
     let dir = tempfile::tempdir().unwrap();
-    let case = dir.path().join("toy");
-    run_json(&["synth", "toy", "--out", s(&case), "-q"]);
-    let mask = dir.path().join("toy.nii.gz");
-    run_json(&[
-        "rasterize",
-        s(&case.join("template.vtk")),
-        "--spacing",
-        "0.5",
-        "--out",
-        s(&mask),
-        "-q",
-    ]);
+    let (case, mask) = synth_mask(dir.path(), "toy");
     let out = dir.path().join("t.vtk");
     // Three sheets meeting at one seam, from the segmentation and from the mesh itself.
     for shape in [mask, case.join("template.vtk")] {
