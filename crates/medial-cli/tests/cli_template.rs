@@ -179,30 +179,27 @@ fn bad_input_gives_a_one_line_error() {
         path
     };
     let header = "# vtk DataFile Version 3.0\nmesh\nASCII\nDATASET POLYDATA\n";
-    let not_vtk = write("not_vtk.vtk", "not a mesh");
-    one_line_error(
-        &["template", s(&not_vtk), "--out", out, "--sheet", sheet],
-        1,
-        &["not_vtk.vtk", "legacy VTK"],
-    );
-    let no_points = write(
-        "no_points.vtk",
-        &format!("{header}POINTS 0 float\nPOLYGONS 0 0\n"),
-    );
-    one_line_error(
-        &["template", s(&no_points), "--out", out, "--sheet", sheet],
-        1,
-        &["no_points.vtk", "no points"],
-    );
-    let open = write(
-        "open.vtk",
-        &format!("{header}POINTS 3 float\n0 0 0 1 0 0 0 1 0\nPOLYGONS 1 4\n3 0 1 2\n"),
-    );
-    one_line_error(
-        &["template", s(&open), "--out", out, "--sheet", sheet],
-        1,
-        &["open.vtk", "open"],
-    );
+    let meshes = [
+        ("not_vtk.vtk", "not a mesh".to_string(), "legacy VTK"),
+        (
+            "no_points.vtk",
+            format!("{header}POINTS 0 float\nPOLYGONS 0 0\n"),
+            "no points",
+        ),
+        (
+            "open.vtk",
+            format!("{header}POINTS 3 float\n0 0 0 1 0 0 0 1 0\nPOLYGONS 1 4\n3 0 1 2\n"),
+            "open",
+        ),
+    ];
+    for (name, content, expected) in meshes {
+        let mesh = write(name, &content);
+        one_line_error(
+            &["template", s(&mesh), "--out", out, "--sheet", sheet],
+            1,
+            &[name, expected],
+        );
+    }
     let text_file = write("shape.txt", "1 2 3");
     one_line_error(
         &["template", s(&text_file), "--out", out],
@@ -214,7 +211,8 @@ fn bad_input_gives_a_one_line_error() {
         1,
         &["no/such/mesh.vtk"],
     );
-    // --label with a mesh.
+    // --label with a mesh (the open one written above).
+    let open = dir.path().join("open.vtk");
     one_line_error(
         &["template", s(&open), "--out", out, "--label", "1"],
         2,

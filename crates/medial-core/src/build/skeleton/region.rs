@@ -174,6 +174,11 @@ impl Region {
         closing: usize,
         lift: &dyn Fn([f64; 2]) -> Vec3,
     ) -> Result<Self> {
+        if points.is_empty() {
+            return Err(Error::InvalidVolume(
+                "no medial points to chart: too few for a sheet".into(),
+            ));
+        }
         let lo = [0, 1].map(|a| points.iter().map(|q| q.0[a]).fold(f64::INFINITY, f64::min));
         let hi = [0, 1].map(|a| (points.iter().map(|q| q.0[a])).fold(f64::NEG_INFINITY, f64::max));
         // A margin of cells, so that no morphology or filling reaches the grid's border.
