@@ -58,8 +58,13 @@ use prism::{prism_faces, PrismFaces};
 use sampling::{subdivide, Ends, Stencil};
 use sums::ChunkSums;
 
-/// Triangles per parallel work item (fixed, so that sums do not depend on the thread count).
-const CHUNK: usize = 128;
+/// Fewest triangles per parallel work item.
+const MIN_CHUNK: usize = 128;
+
+/// Most parallel work items: each sums its gradients into buffers of all `k` landmarks, which
+/// are zeroed and then added in chunk order, so that more chunks than threads cost memory
+/// traffic (`2·k` vectors per chunk) and nothing else. 32 keeps up to 32 threads busy.
+const MAX_CHUNKS: usize = 32;
 
 /// Largest number of prisms accepted (memory and time guard).
 const MAX_PRISMS: usize = 50_000_000;
@@ -210,7 +215,7 @@ impl DiceAttachment {
         let samples = self.samples(&ends, want_grad);
         let chunks: Vec<ChunkSums> = (0..self.triangles.len())
             .into_par_iter()
-            .chunks(CHUNK)
+            .chunks(self.chunk_len())
             .map(|tris| self.chunk_sums(&tris, &ends, &samples, want_grad))
             .collect();
         let total = chunks
@@ -267,6 +272,12 @@ impl DiceAttachment {
                 }
             })
             .collect()
+    }
+
+    /// Triangles per work item: `max(128, ⌈T / 32⌉)` of the `T` subdivided triangles, fixed by
+    /// the mesh so that the sums do not depend on the thread count.
+    fn chunk_len(&self) -> usize {
+        MIN_CHUNK.max(self.triangles.len().div_ceil(MAX_CHUNKS))
     }
 
     /// `s_i = i / layers`.

@@ -65,48 +65,59 @@ impl DiceAttachment {
                 for j in 0..3 {
                     vertex.add(j, s_lower, mean_f * dvol[j], sign * dvol[j]);
                     vertex.add(j, s_upper, mean_f * dvol[j + 3], sign * dvol[j + 3]);
-                    vertex.add(
-                        j,
-                        s_lower + self.half_layer(),
-                        vol / 3.0 * mid[j].grad_f,
-                        Vec3::zeros(),
-                    );
+                    let s_mid = s_lower + self.half_layer();
+                    vertex.add_overlap(j, s_mid, vol / 3.0 * mid[j].grad_f);
                 }
             }
         }
         if want_grad {
             for (j, &v) in tri.iter().enumerate() {
-                self.stencils[v].scatter(&vertex.overlap[j], &mut sums.grad_overlap);
-                self.stencils[v].scatter(&vertex.volume[j], &mut sums.grad_volume);
+                self.stencils[v].scatter(&vertex.overlap[j].ends(), &mut sums.grad_overlap);
+                self.stencils[v].scatter(&vertex.volume[j].ends(), &mut sums.grad_volume);
             }
         }
     }
 }
 
-/// `∂O` and `∂V` with respect to the boundary (`[j][0]`) and medial (`[j][1]`) points of the
-/// three vertices `j` of a subdivided triangle.
-#[derive(Clone, Copy, Debug)]
+/// `∂O` and `∂V` with respect to the boundary and medial points of the three vertices `j` of a
+/// subdivided triangle.
+#[derive(Clone, Copy, Debug, Default)]
 struct VertexGradients {
-    overlap: [[Vec3; 2]; 3],
-    volume: [[Vec3; 2]; 3],
+    overlap: [Along; 3],
+    volume: [Along; 3],
 }
 
-impl Default for VertexGradients {
-    fn default() -> Self {
-        Self {
-            overlap: [[Vec3::zeros(); 2]; 3],
-            volume: [[Vec3::zeros(); 2]; 3],
-        }
+/// A gradient `Σ_x ∂/∂x` over points `x = (1 − s) b + s m` between a boundary point `b` and its
+/// medial point `m`, kept as `Σ ∂/∂x` and `Σ s ∂/∂x`: then `∂/∂m = Σ s ∂/∂x` and
+/// `∂/∂b = Σ ∂/∂x − ∂/∂m`, two vector updates per point instead of four.
+#[derive(Clone, Copy, Debug, Default)]
+struct Along {
+    sum: Vec3,
+    weighted: Vec3,
+}
+
+impl Along {
+    fn add(&mut self, s: f64, d: Vec3) {
+        self.sum += d;
+        self.weighted += s * d;
+    }
+
+    /// `[∂/∂b, ∂/∂m]`.
+    fn ends(&self) -> [Vec3; 2] {
+        [self.sum - self.weighted, self.weighted]
     }
 }
 
 impl VertexGradients {
     /// Adds `∂O/∂x` and `∂V_abs/∂x` at the point `x = (1 − s) b + s m` above vertex `j`.
     fn add(&mut self, j: usize, s: f64, d_overlap: Vec3, d_volume: Vec3) {
-        self.overlap[j][0] += (1.0 - s) * d_overlap;
-        self.overlap[j][1] += s * d_overlap;
-        self.volume[j][0] += (1.0 - s) * d_volume;
-        self.volume[j][1] += s * d_volume;
+        self.overlap[j].add(s, d_overlap);
+        self.volume[j].add(s, d_volume);
+    }
+
+    /// Adds `∂O/∂x` alone (an image sample, which the volume does not depend on).
+    fn add_overlap(&mut self, j: usize, s: f64, d_overlap: Vec3) {
+        self.overlap[j].add(s, d_overlap);
     }
 }
 
