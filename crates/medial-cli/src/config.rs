@@ -231,6 +231,15 @@ pub struct StageConfig {
     /// L-BFGS iterations of the first AL iteration (default: `max_iterations`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub first_iterations: Option<usize>,
+    /// End the AL iterations early, after one past the first whose end has every `|C|` at most
+    /// this (the constraints' unit; in relative units about the angle in radians and the
+    /// relative mismatch) and whose attachment changed by at most `settle_data_change` of it
+    /// (default: off, every AL iteration runs).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub settle_constraint: Option<f64>,
+    /// The attachment's relative change over an AL iteration at most which it has settled.
+    #[serde(default = "defaults::settle_data_change")]
+    pub settle_data_change: f64,
     /// Stop when ‖∇E‖ falls below this fraction of its initial value.
     #[serde(default = "defaults::gradient_tolerance")]
     pub gradient_tolerance: f64,
@@ -298,6 +307,9 @@ mod defaults {
     pub fn progress_decrease() -> f64 {
         0.01
     }
+    pub fn settle_data_change() -> f64 {
+        1e-3
+    }
     pub fn lbfgs_memory() -> usize {
         10
     }
@@ -339,6 +351,8 @@ impl StageConfig {
             al_iterations: defaults::al_iterations(),
             max_iterations: defaults::max_iterations(),
             first_iterations: None,
+            settle_constraint: None,
+            settle_data_change: defaults::settle_data_change(),
             gradient_tolerance: defaults::gradient_tolerance(),
             relative_decrease: defaults::relative_decrease(),
             progress_window: 0,
@@ -532,6 +546,10 @@ impl StageConfig {
         positive("tolerance_pct", self.tolerance_pct)?;
         non_negative("gradient_tolerance", self.gradient_tolerance)?;
         non_negative("relative_decrease", self.relative_decrease)?;
+        if let Some(c) = self.settle_constraint {
+            non_negative("settle_constraint", c)?;
+        }
+        non_negative("settle_data_change", self.settle_data_change)?;
         non_negative("progress_decrease", self.progress_decrease)
     }
 }
@@ -653,6 +671,9 @@ target = "s.vtk"
             ("image_refine = 9", "image_refine must be 1"),
             ("image_refine = 3\nlabel = 2", "does not apply to a label"),
             ("progress_decrease = -1", "progress_decrease"),
+            ("settle_constraint = -0.1", "settle_constraint"),
+            ("settle_constraint = nan", "settle_constraint"),
+            ("settle_data_change = -1", "settle_data_change"),
         ] {
             let e = check(extra).unwrap_err();
             assert!(e.contains(named), "{extra}: {e}");

@@ -409,11 +409,21 @@ pub fn varifold_widths(
     Ok((width, (FINE_WIDTH_FRACTION * width).max(0.5 * edge)))
 }
 
-/// A stage with the medial constraints in relative units and μ rising tenfold over the
-/// AL iterations of `schedule`.
+/// The largest `|C|` (relative units: about 0.06° and 0.1 %) at which an automatic stage's AL
+/// iterations end early once the attachment changes by less than 0.1 % over one
+/// (`settle_constraint`). Measured on the image fits (evaluations, final angle and mismatch):
+/// toy 393 → 296, 0.04° / 0.007 % → 0.05° / 0.014 %; cup 358 → 278, 0.08° / 0.005 % → 0.13° /
+/// 0.011 % (the angle measured at the end of the flow, the constraint at the template's
+/// scale), the same voxel Dice; t001-bent, hard and the point and surface fits unchanged (their
+/// constraints reach 1e-3 only in the last AL iteration, or the attachment still moves).
+const SETTLE_CONSTRAINT: f64 = 1e-3;
+
+/// A stage with the medial constraints in relative units, μ rising tenfold over the AL
+/// iterations of `schedule`, ending early once they settle ([`SETTLE_CONSTRAINT`]).
 fn constrained(name: &str, attachment: AttachmentKind, schedule: Schedule) -> StageConfig {
     let mut stage = StageConfig::new(name, attachment);
     stage.constraint_units = ConstraintUnitsConfig::Relative;
+    stage.settle_constraint = Some(SETTLE_CONSTRAINT);
     stage.mu = schedule.mu;
     stage.mu_factor = 10.0;
     stage.al_iterations = schedule.al_iterations;

@@ -13,7 +13,7 @@ use medial_core::attachment::dice::{DiceAttachment, DiceParams};
 use medial_core::attachment::ssd::Ssd;
 use medial_core::attachment::varifold::{Kind, Varifold, VarifoldParams, DEFAULT_NORMAL_WIDTH};
 use medial_core::attachment::Attachment;
-use medial_core::fit::augmented_lagrangian::{AlSchedule, MuUpdate};
+use medial_core::fit::augmented_lagrangian::{AlSchedule, MuUpdate, Settle};
 use medial_core::fit::objective::Evaluation;
 use medial_core::fit::optimize::{LbfgsOptions, ProgressRule};
 use medial_core::flow::{Flow, FlowParams};
@@ -153,6 +153,10 @@ pub fn prepare(stage: &StageConfig, model: &Model) -> Result<Prepared, CliError>
                 MuUpdateConfig::IfNotHalved => MuUpdate::IfNotHalved,
             },
             first_iterations: stage.first_iterations,
+            settle: stage.settle_constraint.map(|max_abs_constraint| Settle {
+                max_abs_constraint,
+                data_change: stage.settle_data_change,
+            }),
         },
         lbfgs: LbfgsOptions {
             max_iterations: stage.max_iterations,

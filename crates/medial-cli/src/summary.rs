@@ -83,9 +83,12 @@ pub struct StageSummary {
     pub mu: f64,
     /// Why each minimisation stopped.
     pub stop: Vec<String>,
-    /// Whether the last minimisation stopped on a convergence criterion (gradient or relative
-    /// decrease) rather than its iteration budget.
+    /// Whether the AL iterations settled (`settle_constraint`: the constraints held and the
+    /// attachment no longer moved) or the last minimisation stopped on a convergence criterion
+    /// (gradient, relative decrease, progress) rather than its iteration budget.
     pub converged: bool,
+    /// Whether the AL iterations ended because they settled (`settle_constraint`).
+    pub settled: bool,
     /// Restarts of L-BFGS from a sound iterate after an unsound one.
     pub restarts: usize,
     /// Constrained stages: whether the final max spoke–normal angle and max spoke mismatch are

@@ -867,6 +867,7 @@ fn stage_summary(
         mu: outcome.mu,
         stop: outcome.stops.iter().map(|s| s.to_string()).collect(),
         converged: outcome.converged(),
+        settled: outcome.settled,
         restarts: outcome.restarts,
         constraints_met,
         unsound: outcome.unsound.as_ref().map(|u| {

@@ -44,6 +44,30 @@ pub struct AlSchedule {
     /// The L-BFGS budget of the first AL iteration, where the shape is matched under the
     /// weakest penalty (none: [`LbfgsOptions::max_iterations`] like the others), iterations.
     pub first_iterations: Option<usize>,
+    /// Ends the schedule before its last AL iteration once it has settled (none: every AL
+    /// iteration runs).
+    pub settle: Option<Settle>,
+}
+
+/// When an AL schedule has settled: at the end of an AL iteration after the first,
+/// `max |C| ≤ max_abs_constraint` and `|g_j − g_{j−1}| ≤ data_change · |g_j|` (`g_j` the
+/// attachment at the end of AL iteration `j`): the constraints hold and tightening them no
+/// longer moves the fit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settle {
+    /// The largest `|C|` that counts as met, in the constraints' unit (in relative units about
+    /// the spoke–normal angle in radians and the relative spoke mismatch: 1e-3 ≈ 0.06°, 0.1 %).
+    pub max_abs_constraint: f64,
+    /// The largest relative change of the attachment over the AL iteration.
+    pub data_change: f64,
+}
+
+impl Settle {
+    /// Whether `end` (after an AL iteration that began at attachment `previous_data`) settles.
+    fn holds(&self, end: &Evaluation, previous_data: f64) -> bool {
+        end.max_abs_constraint <= self.max_abs_constraint
+            && (end.data - previous_data).abs() <= self.data_change * end.data.abs()
+    }
 }
 
 impl Default for AlSchedule {
@@ -55,6 +79,7 @@ impl Default for AlSchedule {
             iterations: 1,
             mu_update: MuUpdate::Always,
             first_iterations: None,
+            settle: None,
         }
     }
 }
@@ -66,12 +91,15 @@ impl AlSchedule {
             && self.mu_factor.is_finite()
             && self.mu_factor >= 1.0
             && self.mu_max >= self.mu
-            && self.iterations >= 1;
+            && self.iterations >= 1
+            && self.settle.map_or(true, |s| {
+                s.max_abs_constraint >= 0.0 && s.data_change >= 0.0
+            });
         if ok {
             Ok(())
         } else {
             Err(Error::InvalidParameter(format!(
-                "augmented Lagrangian needs mu > 0, mu_factor ≥ 1, mu_max ≥ mu and at least one iteration, got {self:?}"
+                "augmented Lagrangian needs mu > 0, mu_factor ≥ 1, mu_max ≥ mu, at least one iteration and a non-negative settling rule, got {self:?}"
             )))
         }
     }
@@ -144,12 +172,16 @@ pub struct StageOutcome {
     /// Set when the stage ended at an unsound iterate (after a restart): the momenta are then
     /// those of the last sound one, and the fit cannot go on.
     pub unsound: Option<UnsoundStop>,
+    /// Whether the schedule ended early because it settled ([`AlSchedule::settle`]).
+    #[serde(default)]
+    pub settled: bool,
 }
 
 impl StageOutcome {
-    /// Whether the last minimisation stopped on a convergence criterion.
+    /// Whether the schedule settled or the last minimisation stopped on a convergence
+    /// criterion.
     pub fn converged(&self) -> bool {
-        self.stops.last().is_some_and(StopReason::converged)
+        self.settled || self.stops.last().is_some_and(StopReason::converged)
     }
 }
 
@@ -178,6 +210,9 @@ pub struct StageCheckpoint {
     mu: f64,
     lambda: Vec<f64>,
     previous_violation: f64,
+    /// The attachment at the end of the previous AL iteration (for [`Settle`]).
+    #[serde(default)]
+    previous_data: f64,
     /// `E` at the start of the stage, the reference of the divergence guard.
     guard_start: Option<f64>,
     /// The finished minimisations of the stage (its `momenta` are not used).
@@ -214,6 +249,7 @@ impl StageCheckpoint {
             stops,
             restarts: self.done.restarts + m.restarts(),
             unsound: None,
+            settled: false,
         }
     }
 
@@ -229,6 +265,7 @@ struct Schedule {
     mu: f64,
     lambda: Vec<f64>,
     previous_violation: f64,
+    previous_data: f64,
     outcome: StageOutcome,
 }
 
@@ -245,6 +282,7 @@ impl Schedule {
             mu,
             lambda,
             previous_violation: f64::INFINITY,
+            previous_data: f64::NAN,
             outcome: StageOutcome {
                 momenta: Vec::new(),
                 evaluation: Evaluation::default(),
@@ -256,6 +294,7 @@ impl Schedule {
                 stops: Vec::new(),
                 restarts: 0,
                 unsound: None,
+                settled: false,
             },
         }
     }
@@ -278,6 +317,7 @@ impl Schedule {
             mu: c.mu,
             lambda: c.lambda.clone(),
             previous_violation: c.previous_violation,
+            previous_data: c.previous_data,
             outcome: c.done.clone(),
         })
     }
@@ -289,6 +329,7 @@ impl Schedule {
             mu: self.mu,
             lambda: self.lambda,
             previous_violation: self.previous_violation,
+            previous_data: self.previous_data,
             guard_start,
             done: self.outcome,
             minimizer,
@@ -368,7 +409,11 @@ pub fn run_stage(
         outcome.lambda.clone_from(&at.lambda);
         outcome.unsound = unsound_stop(al_iteration, &min);
         outcome.stops.push(min.stop);
-        if outcome.unsound.is_some() || al_iteration + 1 == al_iterations {
+        outcome.settled = al_iteration > 0
+            && outcome.unsound.is_none()
+            && (schedule.settle).is_some_and(|s| s.holds(&outcome.evaluation, at.previous_data));
+        at.previous_data = outcome.evaluation.data;
+        if outcome.unsound.is_some() || outcome.settled || al_iteration + 1 == al_iterations {
             at.outcome.momenta = min.momenta;
             return Ok(StageRun::Done(Box::new(at.outcome)));
         }

@@ -204,6 +204,7 @@ fn check_fits(c: &Checkpoint, stages: usize, len: usize) -> Result<()> {
 mod tests {
     use super::*;
     use crate::attachment::ssd::Ssd;
+    use crate::fit::augmented_lagrangian::Settle;
     use crate::fit::guard::Guard;
     use crate::fit::{ConstraintSet, ProgressRule, StopReason};
     use crate::flow::{Flow, FlowParams};
@@ -501,5 +502,58 @@ mod tests {
         let iterations: Vec<usize> = totals.iter().map(|e| e.len() - 1).collect();
         assert_eq!(iterations, [5, 12, 12]);
         assert_eq!(outcome.iterations, 29);
+    }
+
+    /// The `max |C|` and attachment at the end of each AL iteration of a run of every AL
+    /// iteration (the last report of each minimisation is its optimum).
+    fn al_ends(change: impl Fn(&mut LbfgsOptions, &mut AlSchedule)) -> Vec<(f64, f64)> {
+        let case = Case::new();
+        let mut plan = case.plan();
+        let mut stage = plan.remove(1);
+        change(&mut stage.lbfgs, &mut stage.schedule);
+        let mut ends: Vec<(f64, f64)> = Vec::new();
+        run_stages(&[stage], |event| {
+            if let FitEvent::Iteration { progress, .. } = event {
+                let e = progress.report.evaluation;
+                let end = (e.max_abs_constraint, e.data);
+                match progress.report.iteration {
+                    0 => ends.push(end),
+                    _ => *ends.last_mut().unwrap() = end,
+                }
+            }
+        })
+        .unwrap();
+        ends
+    }
+
+    #[test]
+    fn a_schedule_that_settles_ends_at_the_first_al_iteration_where_it_does() {
+        let budget = |lbfgs: &mut LbfgsOptions, schedule: &mut AlSchedule| {
+            lbfgs.max_iterations = 12;
+            schedule.first_iterations = None;
+        };
+        let all = al_ends(budget);
+        assert_eq!(all.len(), 3);
+        let (c1, c2) = (all[1].0, all[2].0);
+        assert!(c2 < c1, "the constraints tighten: {all:?}");
+        // (rule, AL iterations run, settled): the last AL iteration may settle too.
+        for (max_abs_constraint, data_change, ends_after, settled) in [
+            (c1, 1.0, 2, true),
+            (0.5 * (c1 + c2), 1.0, 3, true),
+            (f64::INFINITY, 0.0, 3, false),
+        ] {
+            let settle = Settle {
+                max_abs_constraint,
+                data_change,
+            };
+            let (outcome, totals) = constrained_run(|lbfgs, schedule| {
+                budget(lbfgs, schedule);
+                schedule.settle = Some(settle);
+            });
+            assert_eq!(totals.len(), ends_after, "{settle:?} on {all:?}");
+            assert_eq!(outcome.al_iterations, ends_after);
+            assert_eq!(outcome.settled, settled);
+            assert!(!settled || outcome.converged());
+        }
     }
 }
