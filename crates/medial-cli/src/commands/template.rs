@@ -197,13 +197,13 @@ struct TemplateFigures {
     grid_dims: [usize; 3],
     /// Medial points found (ridge voxel pairs).
     medial_points: usize,
-    /// The chart the sheet was sampled in: sphere (a bowl) or plane.
-    chart: ChartKind,
-    /// Rows of the sheet's lattice hexagon either side of its middle row, and how many edges
-    /// it is stretched by along it (0: regular, a round sheet).
-    rings: usize,
-    stretch: usize,
-    /// Sheets and seams of the medial points (a branching shape is refused).
+    /// Per sheet, the chart it was sampled in: sphere (a bowl) or plane.
+    chart: Vec<ChartKind>,
+    /// Per sheet, the rows of its lattice hexagon either side of its middle row, and how many
+    /// edges it is stretched by along it (0: regular, a round sheet).
+    rings: Vec<usize>,
+    stretch: Vec<usize>,
+    /// Sheets and seams of the medial points (the sheets are stitched along the seams).
     sheets: usize,
     seams: usize,
     /// Voxel Dice of the template against the shape on the fine grid.
@@ -485,9 +485,9 @@ fn figures_of(
         voxel_mm: voxel,
         grid_dims: mask.dims(),
         medial_points: found.medial_points.len(),
-        chart: found.chart.kind,
-        rings: found.rings,
-        stretch: found.stretch,
+        chart: found.lattices.iter().map(|l| l.chart.kind).collect(),
+        rings: found.lattices.iter().map(|l| l.rings).collect(),
+        stretch: found.lattices.iter().map(|l| l.stretch).collect(),
         sheets: found.branching.sheets,
         seams: found.branching.seams,
         dice,
