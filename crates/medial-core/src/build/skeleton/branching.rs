@@ -310,9 +310,27 @@ mod tests {
 
     #[test]
     fn three_fins_meet_at_one_seam_and_a_folded_sheet_is_one_sheet() {
-        let toy = branching(&fins(&[90.0, 210.0, 330.0]), 0.5).counts;
+        let points = fins(&[90.0, 210.0, 330.0]);
+        let branches = branching(&points, 0.5);
+        let toy = branches.counts;
         assert_eq!((toy.sheets, toy.seams), (3, 1), "{toy:?}");
         assert!(toy.seam_points > 0);
+        assert_eq!(branches.seam_sheets, vec![vec![0, 1, 2]]);
+        // Each fin is one sheet, the seam's points lie about the axis, and every point is on
+        // one or the other.
+        let mut fin_of_sheet = HashMap::new();
+        for (p, (sheet, seam)) in points.iter().zip(branches.sheet.iter().zip(&branches.seam)) {
+            let w = p.position.xy().norm();
+            match (sheet, seam) {
+                (Some(k), None) if w > 0.0 => {
+                    let a = p.position.y.atan2(p.position.x).to_degrees().round() as i64;
+                    assert_eq!(*fin_of_sheet.entry(*k).or_insert(a), a, "{p:?}");
+                }
+                (None, Some(0)) => assert!(w <= 2.0, "a seam point {w} mm off the axis"),
+                other => panic!("{p:?} is {other:?}"),
+            }
+        }
+        assert_eq!(fin_of_sheet.len(), 3);
         // Two fins at 120°: one sheet folded along a line, not a seam.
         let fold = branching(&fins(&[90.0, 210.0]), 0.5).counts;
         assert_eq!((fold.sheets, fold.seams), (1, 0), "{fold:?}");

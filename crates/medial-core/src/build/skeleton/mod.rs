@@ -42,7 +42,7 @@ use disc::{lattice_sheet, ChartedCloud};
 use lattice::Lattice;
 use region::Region;
 use seam::Seam;
-use stitch::{stitch, CUT_SPACINGS};
+use stitch::{stitch, CUT_RADII, CUT_SPACINGS};
 
 pub use ridge::{medial_points, MedialPoint};
 
@@ -156,7 +156,10 @@ pub fn sheet_of_mask(mask: &Volume, sampling: Sampling) -> Result<ShapeSheet> {
 }
 
 /// The stitched sheet of a branching shape (see [`sheet_of_mask`]): the atoms asked for
-/// shared over the sheets by area, `s = √(A/((√3/2)·n))` for `n` atoms over a total area `A`.
+/// shared over the sheets by area, `s = √(A/((√3/2)·n))` for `n` atoms over the sheets' total
+/// area `A` less the bands of width [`CUT_RADII`]` · r̄` along each side of a seam (`r̄` its
+/// mean radius), which the stitching fills with the seam's vertices (at least a quarter of
+/// the area is kept).
 fn several_sheets(
     points: Vec<MedialPoint>,
     branches: &Branches,
@@ -180,8 +183,13 @@ fn several_sheets(
             ChartedSheet::new(of(&own), voxel)
         })
         .collect::<Result<Vec<_>>>()?;
+    // The bands along the seams that the stitching cuts off and fills with the seam's own
+    // vertices hold no lattice points.
+    let bands: f64 = (seams.iter().zip(&branches.seam_sheets))
+        .map(|(seam, on)| on.len() as f64 * CUT_RADII * seam.mean_radius() * seam.length())
+        .sum();
     let area: f64 = charted.iter().map(|c| c.first.area()).sum();
-    let spacing = Sampling::Spacing(atom_spacing(sampling, area)?);
+    let spacing = Sampling::Spacing(atom_spacing(sampling, (area - bands).max(area / 4.0))?);
     let built = (charted.iter())
         .map(|c| {
             let (rings, stretch) = lattice_of(spacing, c.first.area(), c.first.elongation())?;

@@ -25,8 +25,9 @@ impl Seam {
     /// The seam through the medial points `points` (those of one seam) of a mask of mean
     /// voxel `voxel` (mm): with `d` the principal direction of the points and `t = (p − p̄)·d`,
     /// the mean position and radius of the points in each bin of `t` of [`BIN_VOXELS`] voxels
-    /// (empty bins skipped), smoothed by a moving mean over `2·SMOOTHING_BINS + 1` bins (fewer
-    /// at the ends, which are kept where they are), then trimmed at each end while the radius
+    /// (empty bins skipped), smoothed by a moving mean over `2·SMOOTHING_BINS + 1` bins (the
+    /// window shifted inside at the ends) across the seam, each bin kept at its own place
+    /// along `d`, and in radius (the window narrowed at the ends), then trimmed at each end while the radius
     /// changes faster along it than `|dr/ds| = cos(MIN_FEATURE_ANGLE_DEG/2)` ≈ 0.57: where the
     /// seam's line of medial points runs on into the shape's rounded end (radius falling to 0)
     /// past where the sheets' free edges, trimmed by that slope, end.
@@ -69,15 +70,18 @@ impl Seam {
         }
         let n = binned.len();
         let steep = (MIN_FEATURE_ANGLE_DEG / 2.0).to_radians().cos();
+        let width = (2 * SMOOTHING_BINS + 1).min(n);
         let smoothed = |k: usize| {
-            // Symmetric windows, shrinking at the ends so that the ends stay put.
+            // Across the seam, the window about the bin shifted inside at the ends, the bin
+            // keeping its place along the seam; the radius over the symmetric window, narrowed
+            // at the ends (unbiased where the radius changes linearly).
+            let start = k.saturating_sub(SMOOTHING_BINS).min(n - width);
+            let window = &binned[start..start + width];
+            let mean = window.iter().map(|b| b.0).sum::<Vec3>() / width as f64;
+            let along = (binned[k].0 - mean).dot(&direction) * direction;
             let w = SMOOTHING_BINS.min(k).min(n - 1 - k);
-            let window = &binned[k - w..=k + w];
-            let count = window.len() as f64;
-            (
-                window.iter().map(|b| b.0).sum::<Vec3>() / count,
-                window.iter().map(|b| b.1).sum::<f64>() / count,
-            )
+            let radius = binned[k - w..=k + w].iter().map(|b| b.1).sum::<f64>();
+            (mean + along, radius / (2 * w + 1) as f64)
         };
         let smooth: Vec<(Vec3, f64)> = (0..n).map(smoothed).collect();
         let slope = |k: usize| {
@@ -98,6 +102,11 @@ impl Seam {
         }
         let (points, radius) = smooth[first..=last].iter().copied().unzip();
         Ok(Self { points, radius })
+    }
+
+    /// The mean of the radii at the vertices (mm).
+    pub fn mean_radius(&self) -> f64 {
+        self.radius.iter().sum::<f64>() / self.radius.len() as f64
     }
 
     /// The length of the polyline (mm).
@@ -220,7 +229,8 @@ mod tests {
             assert!((r - (2.0 + p.z / 20.0)).abs() < 0.05, "{p} {r}");
         }
         assert!((even.distance(&Vec3::new(3.0, 4.0, 0.0)) - 5.0).abs() < 0.1);
-        // Two points in one bin: no seam.
-        assert!(Seam::fit(&points[..2], 0.5).is_err());
+        // Points in one bin: no seam.
+        let bunch = [points[0]; 5];
+        assert!(Seam::fit(&bunch, 0.5).is_err());
     }
 }

@@ -18,9 +18,10 @@ pub const CUT_SPACINGS: f64 = 0.5;
 /// sheets meet at 120°, the seam's spoke of radius `r` into the region between two of them
 /// (along its bisector) ends `r·cos 60° = r/2` along either sheet from the seam, while a
 /// sheet's spokes end over the sheet's point: the boundary folds over unless the sheet's
-/// points next to the seam, after one subdivision half way across the band, are more than
-/// `r/2` from it, so the band must be wider than `r`.
-pub const CUT_RADII: f64 = 1.2;
+/// points next to the seam, after one subdivision about half way across the band, are more
+/// than `r/2` from it, so the band must be wider than `r`: with 1.2 the toy's mesh folds there
+/// (its subdivided band points came `0.50·r` from the seam); 1.6 leaves a margin.
+pub const CUT_RADII: f64 = 1.6;
 
 /// The sheets `sheets` (each a triangulated disc, consistently oriented) stitched along the
 /// seams `seams` (polylines sampled about as finely as the sheets), with `cut` (mm) the
@@ -243,4 +244,145 @@ fn longest_run(loop_: &[usize], on: impl Fn(usize) -> bool) -> Option<Vec<usize>
         }
     }
     (!best.is_empty()).then_some(best)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::lattice::Lattice;
+    use super::*;
+    use crate::build::inflate::inflate;
+    use std::collections::BTreeMap;
+
+    /// Three fins of width `width` at 120° about the z axis, each a lattice sheet of spacing 1
+    /// reaching `over` mm across the axis (as a sheet fitted to its points and the seam's does),
+    /// its triangles reversed on the second (the stitching keeps either orientation); and the
+    /// seam, the z axis over the lattices' length, radius 1.
+    fn fins(over: f64) -> (Vec<MedialSheet>, Seam) {
+        let lattice = Lattice::new(3, 8);
+        let lo = lattice
+            .points
+            .iter()
+            .map(|p| p[1])
+            .fold(f64::INFINITY, f64::min);
+        let sheets = (0..3)
+            .map(|s| {
+                let a = (90.0 + 120.0 * s as f64).to_radians();
+                let u = Vec3::new(a.cos(), a.sin(), 0.0);
+                let points: Vec<Vec3> = (lattice.points.iter())
+                    .map(|p| (p[1] - lo - over) * u + Vec3::new(0.0, 0.0, p[0]))
+                    .collect();
+                let radius = points.iter().map(|p| 1.0 - 0.02 * p.xy().norm()).collect();
+                let mut triangles = lattice.triangles.clone();
+                if s == 1 {
+                    triangles.iter_mut().for_each(|t| t.swap(1, 2));
+                }
+                MedialSheet::new(points, triangles, radius).unwrap()
+            })
+            .collect();
+        let half = lattice.points.iter().map(|p| p[0]).fold(0.0, f64::max);
+        let seam = Seam {
+            points: vec![Vec3::new(0.0, 0.0, -half), Vec3::new(0.0, 0.0, half)],
+            radius: vec![1.0, 1.0],
+        }
+        .resampled(1.0);
+        (sheets, seam)
+    }
+
+    /// The undirected edges of `triangles` with how often each runs each way.
+    fn directed(triangles: &[[usize; 3]]) -> BTreeMap<(usize, usize), [usize; 2]> {
+        let mut count: BTreeMap<(usize, usize), [usize; 2]> = BTreeMap::new();
+        for t in triangles {
+            for k in 0..3 {
+                let (u, v) = (t[k], t[(k + 1) % 3]);
+                count.entry((u.min(v), u.max(v))).or_default()[usize::from(u > v)] += 1;
+            }
+        }
+        count
+    }
+
+    #[test]
+    fn three_fins_stitched_share_every_seam_edge_and_keep_their_orientation() {
+        let (sheets, seam) = fins(0.3);
+        let seam_count = seam.points.len();
+        let stitched = stitch(&sheets, std::slice::from_ref(&seam), 0.5).unwrap();
+        let triangles = stitched.triangles();
+        let edges = directed(triangles);
+        for (&(u, v), n) in &edges {
+            let on_seam = u < seam_count && v < seam_count;
+            let total = n[0] + n[1];
+            if on_seam {
+                assert_eq!(v, u + 1, "a seam edge joins consecutive seam vertices");
+                assert_eq!(total, 3, "seam edge {u}–{v}");
+            } else {
+                assert!(total <= 2, "edge {u}–{v} in {total} triangles");
+            }
+        }
+        assert_eq!(
+            (edges.keys())
+                .filter(|(u, v)| *u < seam_count && *v < seam_count)
+                .count(),
+            seam_count - 1,
+            "every seam edge is in the sheet"
+        );
+        // The pieces joined across edges of two triangles are the three sheets; within each an
+        // edge runs at most once each way (orientation consistent).
+        let mut pieces = crate::build::inflate::UnionFind::new(triangles.len());
+        let mut by_edge: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
+        for (i, t) in triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (u, v) = (t[k], t[(k + 1) % 3]);
+                by_edge.entry((u.min(v), u.max(v))).or_default().push(i);
+            }
+        }
+        for tris in by_edge.values() {
+            if let [a, b] = tris[..] {
+                pieces.union(a, b);
+            }
+        }
+        let mut sheets_of: BTreeMap<usize, Vec<[usize; 3]>> = BTreeMap::new();
+        for (i, t) in triangles.iter().enumerate() {
+            sheets_of.entry(pieces.find(i)).or_default().push(*t);
+        }
+        assert_eq!(sheets_of.len(), 3);
+        for piece in sheets_of.values() {
+            assert!(directed(piece).values().all(|n| n[0] <= 1 && n[1] <= 1));
+        }
+        // No vertex within the cut of the seam but the seam's, and the result inflates.
+        for p in &stitched.points()[seam_count..] {
+            assert!(seam.distance(p) > CUT_RADII, "{p}");
+        }
+        inflate(&stitched.loop_subdivide().unwrap()).expect("an inflatable sheet");
+    }
+
+    #[test]
+    fn the_zipper_uses_every_edge_of_both_polylines_once() {
+        // A run of 4 points above a polyline of 6 along x.
+        let mut points: Vec<Vec3> = (0..4).map(|i| Vec3::new(i as f64, 1.0, 0.0)).collect();
+        points.extend((0..6).map(|j| Vec3::new(0.6 * j as f64, 0.0, 0.0)));
+        let (a, b): (Vec<usize>, Vec<usize>) = ((0..4).collect(), (4..10).collect());
+        let mut triangles = Vec::new();
+        zip(&a, &b, &points, &mut triangles);
+        assert_eq!(triangles.len(), 3 + 5);
+        let edges = directed(&triangles);
+        for w in a.windows(2) {
+            assert_eq!(
+                edges[&(w[0], w[1])],
+                [0, 1],
+                "the run is used against its direction"
+            );
+        }
+        for w in b.windows(2) {
+            assert_eq!(
+                edges[&(w[0], w[1])],
+                [1, 0],
+                "the polyline along its direction"
+            );
+        }
+        // Counter-clockwise seen from +z, as a sheet above the run (y > 1) whose triangles run
+        // along it in +x is.
+        for t in &triangles {
+            let [p, q, r] = t.map(|k| points[k]);
+            assert!((q - p).cross(&(r - p)).z > 0.0, "{t:?}");
+        }
+    }
 }
