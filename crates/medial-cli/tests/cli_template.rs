@@ -123,8 +123,14 @@ fn a_template_of_the_synthetic_cup_meets_the_targets() {
 fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
     let dir = tempfile::tempdir().unwrap();
     let (case, mask) = synth_mask(dir.path(), "toy");
-    // Three sheets meeting at one seam, from the segmentation and from the mesh itself.
-    for (name, shape) in [("mask", mask), ("mesh", case.join("template.vtk"))] {
+    // Three sheets meeting at one seam, from the segmentation, from the mesh itself, and from
+    // the toy's target segmentation (twisted, bent and mapped affinely: curved sheets).
+    let shapes = [
+        ("mask", mask),
+        ("mesh", case.join("template.vtk")),
+        ("warped", case.join("target.nii.gz")),
+    ];
+    for (name, shape) in shapes {
         let out = dir.path().join(format!("{name}.vtk"));
         let sheet = dir.path().join(format!("{name}_sheet.vtk"));
         let start = std::time::Instant::now();

@@ -30,10 +30,10 @@ pub const CUT_RADII: f64 = 1.6;
 /// after sheet; its triangles keep each sheet's orientation.
 ///
 /// For every sheet: the vertices within `cut` of a seam or [`CUT_RADII`] times its radius
-/// there are dropped with their triangles, then
-/// the triangles left with two or three free edges (ears, which inflation refuses); its free
-/// edges form loops; the longest run of consecutive loop vertices that lost a triangle and are
-/// nearest to seam `s` is the cut along `s`, zipped to `s` ([`zip`]).
+/// there are dropped with their triangles; its free edges form loops; the longest run of
+/// consecutive loop vertices that lost a triangle and are nearest to seam `s` is the cut along
+/// `s`, zipped to `s` ([`zip`]). Then the ears are dropped ([`drop_ears`]) and the points no
+/// triangle uses (the order of the others kept).
 ///
 /// Errors: `InvalidVolume` when a sheet's free edges do not form simple loops after the cut
 /// (it fell apart) or a seam has no sheet along it; those of [`MedialSheet::new`] (an edge in
@@ -78,7 +78,48 @@ pub fn stitch(sheets: &[MedialSheet], seams: &[Seam], cut: f64) -> Result<Medial
             "no medial sheet reaches seam {s}: nothing to stitch along it"
         )));
     }
+    drop_ears(&mut triangles);
+    let (points, triangles, radius) = used_only(points, &triangles, radius);
     MedialSheet::new(points, triangles, radius)
+}
+
+/// Drops the triangles with two or three free edges (ears: inflation refuses them, their
+/// sides would collapse), again until none is left: the corners of a sheet cut across where
+/// the cut meets its free edge. (Dropped before zipping they would eat a narrow strip left by
+/// the cut from its ends, each triangle's cut edge being free then.)
+fn drop_ears(triangles: &mut Vec<[usize; 3]>) {
+    loop {
+        let free = free_edges(triangles);
+        let before = triangles.len();
+        triangles.retain(|t| {
+            let on_free = (0..3).filter(|&k| free.contains(&(t[k], t[(k + 1) % 3])));
+            on_free.count() < 2
+        });
+        if triangles.len() == before {
+            return;
+        }
+    }
+}
+
+/// The points (and radii) that `triangles` use, in their order, and the triangles renumbered.
+fn used_only(
+    points: Vec<Vec3>,
+    triangles: &[[usize; 3]],
+    radius: Vec<f64>,
+) -> (Vec<Vec3>, Vec<[usize; 3]>, Vec<f64>) {
+    let mut used = vec![false; points.len()];
+    triangles.iter().flatten().for_each(|&v| used[v] = true);
+    let mut number = vec![0; points.len()];
+    let mut next = 0;
+    for (v, &u) in used.iter().enumerate() {
+        number[v] = next;
+        next += usize::from(u);
+    }
+    let keep = |v: &usize| used[*v];
+    let points = (0..points.len()).filter(keep).map(|v| points[v]).collect();
+    let radius = (0..radius.len()).filter(keep).map(|v| radius[v]).collect();
+    let triangles = triangles.iter().map(|t| t.map(|v| number[v])).collect();
+    (points, triangles, radius)
 }
 
 /// Triangulates the band between the cut `a` (a run of a sheet's free edge, in the direction
@@ -116,30 +157,17 @@ struct CutSheet {
 }
 
 impl CutSheet {
-    /// `sheet` less its vertices within `cut` of a seam, their triangles, and the ears left.
+    /// `sheet` less its vertices within `cut` of a seam and their triangles.
     ///
     /// Errors: `InvalidVolume` when the free edges left do not form simple loops.
     fn new(sheet: &MedialSheet, seams: &[Seam], cut: f64) -> Result<Self> {
         let near_seam: Vec<bool> = (sheet.points().iter())
             .map(|p| (seams.iter()).any(|s| s.distance(p) <= cut.max(CUT_RADII * s.radius_near(p))))
             .collect();
-        let mut triangles: Vec<[usize; 3]> = (sheet.triangles().iter())
+        let triangles: Vec<[usize; 3]> = (sheet.triangles().iter())
             .filter(|t| t.iter().all(|&v| !near_seam[v]))
             .copied()
             .collect();
-        loop {
-            let free = free_edges(&triangles);
-            let before = triangles.len();
-            triangles.retain(|t| {
-                (0..3)
-                    .filter(|&k| free.contains(&(t[k], t[(k + 1) % 3])))
-                    .count()
-                    < 2
-            });
-            if triangles.len() == before {
-                break;
-            }
-        }
         let kept: HashSet<[usize; 3]> = triangles.iter().copied().collect();
         let used: HashSet<usize> = triangles.iter().flatten().copied().collect();
         let cut: HashSet<usize> = (sheet.triangles().iter())
