@@ -21,8 +21,14 @@
 //!    not overshoot the shape's rim.
 //!
 //! A sheet is built for shapes of one simply connected sheet whose chart is one-to-one (discs,
-//! bowls and strips: the heart wall, placenta, leaflets, cmrep's t001); branching shapes
-//! (sheets meeting at seams, found by [`branching::branching`]) are refused with their counts.
+//! bowls and strips: the heart wall, placenta, leaflets, cmrep's t001). A branching shape
+//! (sheets meeting at seams, found by [`branching::branching`], the paper's toy) is built sheet
+//! by sheet: each sheet by steps 3–5 on its own medial points and those of its seams; each seam
+//! a polyline through its points ([`seam::Seam`]), clipped to where the sheets reach along it
+//! and sampled at the sheets' lattice spacing; the sheets stitched along it ([`stitch`]): each
+//! sheet's vertices within a band of the seam dropped, the band between the cut and the seam
+//! triangulated by a zipper, so that every seam edge is in three triangles. Several sheets
+//! without a seam are refused with their counts.
 
 pub mod branching;
 pub mod chart;
