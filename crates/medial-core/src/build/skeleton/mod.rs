@@ -48,7 +48,7 @@ use disc::{lattice_sheet, ChartedCloud};
 use lattice::Lattice;
 use region::Region;
 use seam::Seam;
-use stitch::{stitch, CUT_RADII, CUT_SPACINGS};
+use stitch::{free_edges, stitch, CUT_RADII, CUT_SPACINGS};
 
 pub use ridge::{medial_points, MedialPoint};
 
@@ -247,16 +247,8 @@ fn clipped(seam: &Seam, along: &[&MedialSheet], reach: f64) -> Seam {
 
 /// The points of `sheet` on an edge of one triangle, ascending.
 fn free_edge_points(sheet: &MedialSheet) -> Vec<usize> {
-    let mut count: std::collections::HashMap<(usize, usize), usize> = Default::default();
-    for t in sheet.triangles() {
-        for k in 0..3 {
-            let (u, v) = (t[k], t[(k + 1) % 3]);
-            *count.entry((u.min(v), u.max(v))).or_default() += 1;
-        }
-    }
-    let mut free: Vec<usize> = (count.into_iter())
-        .filter(|&(_, n)| n == 1)
-        .flat_map(|((u, v), _)| [u, v])
+    let mut free: Vec<usize> = (free_edges(sheet.triangles()).into_iter())
+        .flat_map(|(u, v)| [u, v])
         .collect();
     free.sort_unstable();
     free.dedup();

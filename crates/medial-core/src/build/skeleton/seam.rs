@@ -111,16 +111,13 @@ impl Seam {
 
     /// The length of the polyline (mm).
     pub fn length(&self) -> f64 {
-        self.points.windows(2).map(|w| (w[1] - w[0]).norm()).sum()
+        self.arcs()[self.points.len() - 1]
     }
 
     /// The seam resampled at `max(1, round(L / spacing))` equal steps of arc length (`L` its
     /// length), position and radius interpolated linearly; the ends kept.
     pub fn resampled(&self, spacing: f64) -> Self {
-        let mut arc = vec![0.0];
-        for w in self.points.windows(2) {
-            arc.push(arc[arc.len() - 1] + (w[1] - w[0]).norm());
-        }
+        let arc = self.arcs();
         let length = arc[arc.len() - 1];
         let steps = ((length / spacing).round() as usize).max(1);
         let (points, radius) = (0..=steps)
@@ -166,10 +163,7 @@ impl Seam {
     /// The part of the polyline between arc lengths `from < to` (mm), clamped to it, with
     /// new end vertices interpolated there.
     pub fn between(&self, from: f64, to: f64) -> Self {
-        let mut arc = vec![0.0];
-        for w in self.points.windows(2) {
-            arc.push(arc[arc.len() - 1] + (w[1] - w[0]).norm());
-        }
+        let arc = self.arcs();
         let (from, to) = (from.max(0.0), to.min(arc[arc.len() - 1]));
         let mut part = vec![self.at(&arc, from)];
         part.extend(
@@ -180,6 +174,15 @@ impl Seam {
         part.push(self.at(&arc, to));
         let (points, radius) = part.into_iter().unzip();
         Self { points, radius }
+    }
+
+    /// The arc length at each vertex (mm, 0 at the first).
+    fn arcs(&self) -> Vec<f64> {
+        let mut arc = vec![0.0];
+        for w in self.points.windows(2) {
+            arc.push(arc[arc.len() - 1] + (w[1] - w[0]).norm());
+        }
+        arc
     }
 
     /// Position and radius at arc length `s` along the polyline, its vertices at arc lengths

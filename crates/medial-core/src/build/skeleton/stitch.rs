@@ -205,7 +205,7 @@ impl CutSheet {
 
 /// The free edges of `triangles` (edges in one triangle), in the direction their triangle
 /// runs.
-fn free_edges(triangles: &[[usize; 3]]) -> HashSet<(usize, usize)> {
+pub(super) fn free_edges(triangles: &[[usize; 3]]) -> HashSet<(usize, usize)> {
     let mut count: HashMap<(usize, usize), usize> = HashMap::new();
     for t in triangles {
         for k in 0..3 {
