@@ -1,7 +1,8 @@
-//! Medial sheets recovered from shapes with a known medial sheet: the synthetic cup, its
-//! template rasterized (the template's own medial points and spokes are the truth).
+//! Medial sheets recovered from shapes with a known medial sheet: the synthetic cup and the
+//! toy (three sheets meeting at a seam), their templates rasterized (the templates' own medial
+//! points and spokes are the truth).
 
-use medial::build::{sheet_of_mask, Sampling};
+use medial::build::{sheet_of_mask, Sampling, ShapeSheet};
 use medial::image::rasterize::{grid_around, rasterize};
 use medial::model::{MedialTemplate, SpokeMetrics};
 use medial::synth::{boundary_mesh, Shape, SyntheticCase};
@@ -63,27 +64,33 @@ fn to_sheet(template: &MedialTemplate, radius: &[f64], p: Vec3) -> (f64, f64) {
         .expect("a sheet has triangles")
 }
 
-/// Recovers the sheet of a synthetic shape's own template; returns per vertex inside the
-/// recovered sheet (off its free edge: the rasterized rim is a polyhedral wedge whose medial
-/// axis thins to its tip, not the rounded rim the spokes describe) the distance to the true
-/// sheet and the radius error.
-fn recovered(shape: Shape) -> Vec<(f64, f64)> {
+/// The template of a synthetic shape and the sheet recovered from its rasterization.
+fn recover(shape: Shape) -> (MedialTemplate, ShapeSheet) {
     let case = SyntheticCase::build(shape).unwrap();
-    let template = &case.projection.template;
-    let boundary = boundary_mesh(template).unwrap();
+    let template = case.projection.template;
+    let boundary = boundary_mesh(&template).unwrap();
     let (dims, to_world) = grid_around(&boundary, VOXEL, 3.0 * VOXEL).unwrap();
     let mask = rasterize(&boundary, dims, to_world).unwrap();
     let found = sheet_of_mask(&mask, Sampling::Atoms(300)).unwrap();
+    (template, found)
+}
+
+/// Per vertex of the recovered sheet `found` inside it (off its free edges: the rasterized rim
+/// is a polyhedral wedge whose medial axis thins to its tip, not the rounded rim the spokes
+/// describe; and off its seams) the distance to the true sheet of `template` and the radius
+/// error.
+fn sheet_errors(template: &MedialTemplate, found: &ShapeSheet) -> Vec<(f64, f64)> {
     let metrics = SpokeMetrics::compute(template, template.landmarks());
     let radius: Vec<f64> = metrics.thickness.iter().map(|t| t / 2.0).collect();
     let border: std::collections::HashSet<usize> = found.border.iter().copied().collect();
+    let seam_vertices: usize = found.seams.iter().map(|s| s.points.len()).sum();
     found
         .sheet
         .points()
         .iter()
         .zip(found.sheet.radius())
         .enumerate()
-        .filter(|(k, _)| !border.contains(k))
+        .filter(|(k, _)| !border.contains(k) && *k >= seam_vertices)
         .map(|(_, (p, r))| {
             let (d, r_true) = to_sheet(template, &radius, *p);
             (d, r - r_true)
@@ -91,14 +98,19 @@ fn recovered(shape: Shape) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// The mean and the largest of `values`.
+fn mean_max(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+    let n = values.clone().count() as f64;
+    (values.clone().sum::<f64>() / n, values.fold(0.0, f64::max))
+}
+
 #[test]
 fn the_cup_sheet_is_recovered_within_half_a_voxel_on_average_and_its_radius_within_a_voxel() {
-    let errors = recovered(Shape::Cup);
-    let n = errors.len() as f64;
-    let mean_d = errors.iter().map(|e| e.0).sum::<f64>() / n;
-    let max_d = errors.iter().map(|e| e.0).fold(0.0, f64::max);
-    let mean_r = errors.iter().map(|e| e.1).sum::<f64>() / n;
-    let max_r = errors.iter().map(|e| e.1.abs()).fold(0.0, f64::max);
+    let (template, found) = recover(Shape::Cup);
+    let errors = sheet_errors(&template, &found);
+    let (mean_d, max_d) = mean_max(errors.iter().map(|e| e.0));
+    let mean_r = errors.iter().map(|e| e.1).sum::<f64>() / errors.len() as f64;
+    let max_r = mean_max(errors.iter().map(|e| e.1.abs())).1;
     eprintln!("cup: distance mean {mean_d:.3} max {max_d:.3}; radius error mean {mean_r:.3} max |{max_r:.3}|");
     assert!(
         mean_d <= VOXEL / 2.0,
@@ -106,4 +118,76 @@ fn the_cup_sheet_is_recovered_within_half_a_voxel_on_average_and_its_radius_with
     );
     assert!(max_d <= VOXEL, "sheet {max_d} mm from the true one");
     assert!(max_r <= VOXEL, "radius off by {max_r} mm");
+}
+
+/// The distance from `p` to the polyline `line` (mm).
+fn to_polyline(line: &[Vec3], p: &Vec3) -> f64 {
+    line.windows(2)
+        .map(|w| {
+            let e = w[1] - w[0];
+            let t = ((p - w[0]).dot(&e) / e.norm_squared()).clamp(0.0, 1.0);
+            (p - (w[0] + t * e)).norm()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn the_toy_seam_is_recovered_within_a_voxel_and_its_sheets_within_half_a_voxel_on_average() {
+    let (template, found) = recover(Shape::Toy);
+    assert_eq!((found.branching.sheets, found.branching.seams), (3, 1));
+    // The true seam: the template's medial edges in three triangles, along z (its ends, where
+    // it meets the free edges, are corners with one spoke per region there).
+    let mut in_triangles: std::collections::HashMap<(usize, usize), usize> = Default::default();
+    for t in template.medial_triangles() {
+        for k in 0..3 {
+            let (u, v) = (t[k], t[(k + 1) % 3]);
+            *in_triangles.entry((u.min(v), u.max(v))).or_default() += 1;
+        }
+    }
+    let mut on_seam: Vec<usize> = (in_triangles.iter())
+        .filter(|&(_, &n)| n == 3)
+        .flat_map(|(&(u, v), _)| [u, v])
+        .collect();
+    on_seam.sort_unstable();
+    on_seam.dedup();
+    let z = |m: &usize| template.medial_points()[*m].z;
+    on_seam.sort_by(|a, b| z(a).total_cmp(&z(b)));
+    let seam: Vec<Vec3> = on_seam
+        .iter()
+        .map(|&m| template.medial_points()[m])
+        .collect();
+    let recovered = &found.seams[0].points;
+    // Off its ends (on the free edges, as the sheets' free-edge vertices are left out below).
+    let inner = &recovered[1..recovered.len() - 1];
+    let (mean_seam, max_seam) = mean_max(inner.iter().map(|p| to_polyline(&seam, p)));
+    // Its ends, where the sheets' free edges meet it, lie where the wide-angle medial points of
+    // the rounded rim end: beyond the true ends (z = ±12 mm), within the true end's radius.
+    let metrics = SpokeMetrics::compute(&template, template.landmarks());
+    let true_end = seam[seam.len() - 1].z;
+    let end_radius = metrics.thickness[on_seam[on_seam.len() - 1]] / 2.0;
+    let found_ends = [recovered[0].z, recovered[recovered.len() - 1].z];
+    let (lo, hi) = (
+        found_ends[0].min(found_ends[1]),
+        found_ends[0].max(found_ends[1]),
+    );
+    let errors = sheet_errors(&template, &found);
+    let (mean_d, max_d) = mean_max(errors.iter().map(|e| e.0));
+    let mean_r = errors.iter().map(|e| e.1).sum::<f64>() / errors.len() as f64;
+    eprintln!(
+        "toy: seam {} vertices, off its ends distance mean {mean_seam:.3} max {max_seam:.3} \
+         mm, ends {lo:.2} {hi:.2} mm (true ±{true_end:.2}, radius {end_radius:.2}); sheets distance mean {mean_d:.3} \
+         max {max_d:.3} mm, radius error mean {mean_r:.3} mm",
+        recovered.len()
+    );
+    assert!(max_seam <= VOXEL, "seam {max_seam} mm from the true one");
+    for end in [-lo, hi] {
+        assert!(
+            end >= true_end - VOXEL && end <= true_end + end_radius,
+            "seam end at ±{end} mm"
+        );
+    }
+    assert!(
+        mean_d <= VOXEL / 2.0,
+        "sheets {mean_d} mm from the true ones on average"
+    );
 }

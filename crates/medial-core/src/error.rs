@@ -41,10 +41,11 @@ pub enum Error {
     /// did not converge).
     #[error("not invertible: {0}")]
     NotInvertible(String),
-    /// A shape whose medial axis branches (sheets meeting at seams) where one sheet is needed.
+    /// A shape whose medial points form several sheets that no seam joins (templates are built
+    /// of one sheet or of sheets meeting at seams).
     #[error(
-        "the shape's medial axis branches: {sheets} sheets meeting at {seams} seam{}; only \
-         single-sheet templates are built",
+        "the shape's medial axis falls apart: {sheets} sheets meeting at {seams} seam{}; a \
+         template is built of one sheet or of sheets meeting at seams",
         if *seams == 1 { "" } else { "s" }
     )]
     Branching {

@@ -3,8 +3,9 @@
 //! 1. the shape as a mask on a grid fine enough for its thinnest wall (a third of the 10th
 //!    percentile of the half thicknesses found on a first, coarser grid);
 //! 2. its medial sheet with a radius per vertex ([`sheet_of_mask`]: exact distance and feature
-//!    transform, wide-angle ridge points, sheets and seams (a branching shape is refused), a
-//!    chart, a harmonic map of its region onto a triangular-lattice hexagon);
+//!    transform, wide-angle ridge points, sheets and seams, per sheet a chart and a harmonic
+//!    map of its region onto a triangular-lattice hexagon; sheets meeting at a seam stitched
+//!    along it into edges of three triangles);
 //! 3. one Loop subdivision, inflation and projection onto the medial constraints;
 //! 4. the automatic constrained Dice fit of that template to the mask itself (`medial fit`'s
 //!    own schedule, run in process), then projection again, so that the template matches its
@@ -62,8 +63,8 @@ pub struct TemplateArgs {
     /// The shape: a binary segmentation (.nii, .nii.gz, .exr; foreground = value > 0 or
     /// --label; a graded signed image, a level set, is cut at 0 on the fine grid) or a closed
     /// triangle mesh (.vtk, .obj, .gltf, .glb), world coordinates in mm.
-    /// One sheet: a disc, a bowl or a strip (heart wall, placenta, leaflet, cmrep's t001);
-    /// a shape whose sheets meet at seams is refused with its sheet and seam counts.
+    /// One sheet: a disc, a bowl or a strip (heart wall, placenta, leaflet, cmrep's t001), or
+    /// sheets meeting at seams (the paper's toy: three sheets, one seam).
     #[arg(value_name = "SHAPE")]
     pub shape: PathBuf,
     /// The template to write (cmrep boundary template, legacy VTK).
@@ -197,13 +198,13 @@ struct TemplateFigures {
     grid_dims: [usize; 3],
     /// Medial points found (ridge voxel pairs).
     medial_points: usize,
-    /// The chart the sheet was sampled in: sphere (a bowl) or plane.
-    chart: ChartKind,
-    /// Rows of the sheet's lattice hexagon either side of its middle row, and how many edges
-    /// it is stretched by along it (0: regular, a round sheet).
-    rings: usize,
-    stretch: usize,
-    /// Sheets and seams of the medial points (a branching shape is refused).
+    /// Per sheet, the chart it was sampled in: sphere (a bowl) or plane.
+    chart: Vec<ChartKind>,
+    /// Per sheet, the rows of its lattice hexagon either side of its middle row, and how many
+    /// edges it is stretched by along it (0: regular, a round sheet).
+    rings: Vec<usize>,
+    stretch: Vec<usize>,
+    /// Sheets and seams of the medial points (the sheets are stitched along the seams).
     sheets: usize,
     seams: usize,
     /// Voxel Dice of the template against the shape on the fine grid.
@@ -485,9 +486,9 @@ fn figures_of(
         voxel_mm: voxel,
         grid_dims: mask.dims(),
         medial_points: found.medial_points.len(),
-        chart: found.chart.kind,
-        rings: found.rings,
-        stretch: found.stretch,
+        chart: found.lattices.iter().map(|l| l.chart.kind).collect(),
+        rings: found.lattices.iter().map(|l| l.rings).collect(),
+        stretch: found.lattices.iter().map(|l| l.stretch).collect(),
         sheets: found.branching.sheets,
         seams: found.branching.seams,
         dice,

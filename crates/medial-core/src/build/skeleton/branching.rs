@@ -34,7 +34,36 @@ pub struct Branching {
     pub seam_points: usize,
 }
 
-/// The [`Branching`] of the medial points `points` of a mask of mean voxel `voxel` (mm).
+/// Where each medial point lies ([`branching`]): on a sheet, on a seam, or on neither (a spur).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Branches {
+    /// The counts.
+    pub counts: Branching,
+    /// The sheet (`0 .. sheets`) of every point off the seams; `None` on a seam or a spur.
+    pub sheet: Vec<Option<usize>>,
+    /// The seam (`0 .. seams`) of every point on one; `None` elsewhere.
+    pub seam: Vec<Option<usize>>,
+    /// The sheets that reach each seam (at least three), ascending.
+    pub seam_sheets: Vec<Vec<usize>>,
+}
+
+impl Branches {
+    /// The indices of the points of sheet `k`.
+    pub fn sheet_points(&self, k: usize) -> Vec<usize> {
+        (0..self.sheet.len())
+            .filter(|&i| self.sheet[i] == Some(k))
+            .collect()
+    }
+
+    /// The indices of the points of seam `k`.
+    pub fn seam_points(&self, k: usize) -> Vec<usize> {
+        (0..self.seam.len())
+            .filter(|&i| self.seam[i] == Some(k))
+            .collect()
+    }
+}
+
+/// The [`Branches`] of the medial points `points` of a mask of mean voxel `voxel` (mm).
 ///
 /// 1. A point is on a seam when the points within `r = 4·voxel` of it are not flat: the
 ///    smallest eigenvalue of their covariance is at least 0.1 of the trace (`SEAM_FLATNESS`).
@@ -44,7 +73,10 @@ pub struct Branching {
 ///    5 % of the points (`MIN_SHEET_FRACTION`) are spurs and are dropped.
 /// 3. A seam that at least three pieces reach (a point within `2r` of it) is a seam; the pieces
 ///    on either side of one that fewer reach are one sheet.
-pub fn branching(points: &[MedialPoint], voxel: f64) -> Branching {
+/// 4. The points left out of the pieces near a seam (within `r` of it), and those of lines of
+///    non-flat points that are not seams, go to the sheet of the nearest point of a piece
+///    within `2r`.
+pub fn branching(points: &[MedialPoint], voxel: f64) -> Branches {
     let r = BALL_VOXELS * voxel;
     let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
     let grid = Grid::new(&positions, r);
@@ -97,20 +129,79 @@ pub fn branching(points: &[MedialPoint], voxel: f64) -> Branching {
     }
     let slot = |p: usize| kept.binary_search(&p).expect("a kept piece");
     let mut sheets = UnionFind::new(kept.len());
-    let mut seams = 0;
-    for pieces in reach.values() {
+    let mut seam_numbers: Vec<usize> = Vec::new();
+    for (&seam, pieces) in &reach {
         let pieces: Vec<usize> = pieces.iter().map(|&p| slot(p)).collect();
         if pieces.len() >= 3 {
-            seams += 1;
+            seam_numbers.push(seam);
         } else if let [a, b] = pieces[..] {
             sheets.union(a, b);
         }
     }
-    let roots: HashSet<usize> = (0..kept.len()).map(|k| sheets.find(k)).collect();
-    Branching {
-        sheets: roots.len(),
-        seams,
-        seam_points: seam_points.len(),
+    seam_numbers.sort_unstable();
+    let roots: Vec<usize> = (0..kept.len()).map(|k| sheets.find(k)).collect();
+    let mut distinct = roots.clone();
+    distinct.sort_unstable();
+    distinct.dedup();
+    let number = |p: usize| distinct.binary_search(&roots[slot(p)]).expect("a root");
+    let seam_sheets = (seam_numbers.iter())
+        .map(|s| {
+            let mut on: Vec<usize> = reach[s].iter().map(|&p| number(p)).collect();
+            on.sort_unstable();
+            on.dedup();
+            on
+        })
+        .collect();
+    let mut sheet = vec![None; positions.len()];
+    for (k, &i) in sheet_points.iter().enumerate() {
+        if kept.binary_search(&sheet_piece[k]).is_ok() {
+            sheet[i] = Some(number(sheet_piece[k]));
+        }
+    }
+    let mut seam = vec![None; positions.len()];
+    for (k, &i) in seam_points.iter().enumerate() {
+        seam[i] = seam_numbers.binary_search(&seam_piece[k]).ok();
+    }
+    assign_to_nearest_sheet(&positions, &mut sheet, &seam, 2.0 * r);
+    Branches {
+        counts: Branching {
+            sheets: distinct.len(),
+            seams: seam_numbers.len(),
+            seam_points: seam_points.len(),
+        },
+        sheet,
+        seam,
+        seam_sheets,
+    }
+}
+
+/// Gives every point off the seams and off the sheets (`sheet` and `seam` both `None`) the
+/// sheet of the nearest point of a sheet within `reach` mm, if any.
+fn assign_to_nearest_sheet(
+    positions: &[Vec3],
+    sheet: &mut [Option<usize>],
+    seam: &[Option<usize>],
+    reach: f64,
+) {
+    let labelled: Vec<usize> = (0..positions.len())
+        .filter(|&i| sheet[i].is_some())
+        .collect();
+    let labelled_positions: Vec<Vec3> = labelled.iter().map(|&i| positions[i]).collect();
+    let grid = Grid::new(&labelled_positions, reach);
+    let nearest: Vec<(usize, Option<usize>)> = (0..positions.len())
+        .into_par_iter()
+        .filter(|&i| sheet[i].is_none() && seam[i].is_none())
+        .map(|i| {
+            let near = grid.within(&labelled_positions, positions[i], reach);
+            let distance = |k: &usize| (labelled_positions[*k] - positions[i]).norm();
+            let best = near
+                .into_iter()
+                .min_by(|a, b| distance(a).total_cmp(&distance(b)));
+            (i, best.and_then(|k| sheet[labelled[k]]))
+        })
+        .collect();
+    for (i, s) in nearest {
+        sheet[i] = s;
     }
 }
 
@@ -219,14 +310,32 @@ mod tests {
 
     #[test]
     fn three_fins_meet_at_one_seam_and_a_folded_sheet_is_one_sheet() {
-        let toy = branching(&fins(&[90.0, 210.0, 330.0]), 0.5);
+        let points = fins(&[90.0, 210.0, 330.0]);
+        let branches = branching(&points, 0.5);
+        let toy = branches.counts;
         assert_eq!((toy.sheets, toy.seams), (3, 1), "{toy:?}");
         assert!(toy.seam_points > 0);
+        assert_eq!(branches.seam_sheets, vec![vec![0, 1, 2]]);
+        // Each fin is one sheet, the seam's points lie about the axis, and every point is on
+        // one or the other.
+        let mut fin_of_sheet = HashMap::new();
+        for (p, (sheet, seam)) in points.iter().zip(branches.sheet.iter().zip(&branches.seam)) {
+            let w = p.position.xy().norm();
+            match (sheet, seam) {
+                (Some(k), None) if w > 0.0 => {
+                    let a = p.position.y.atan2(p.position.x).to_degrees().round() as i64;
+                    assert_eq!(*fin_of_sheet.entry(*k).or_insert(a), a, "{p:?}");
+                }
+                (None, Some(0)) => assert!(w <= 2.0, "a seam point {w} mm off the axis"),
+                other => panic!("{p:?} is {other:?}"),
+            }
+        }
+        assert_eq!(fin_of_sheet.len(), 3);
         // Two fins at 120°: one sheet folded along a line, not a seam.
-        let fold = branching(&fins(&[90.0, 210.0]), 0.5);
+        let fold = branching(&fins(&[90.0, 210.0]), 0.5).counts;
         assert_eq!((fold.sheets, fold.seams), (1, 0), "{fold:?}");
         // A flat sheet: no seam points at all.
-        let flat = branching(&fins(&[0.0, 180.0]), 0.5);
+        let flat = branching(&fins(&[0.0, 180.0]), 0.5).counts;
         assert_eq!((flat.sheets, flat.seams, flat.seam_points), (1, 0, 0));
     }
 }

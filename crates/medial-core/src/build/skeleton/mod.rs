@@ -21,8 +21,14 @@
 //!    not overshoot the shape's rim.
 //!
 //! A sheet is built for shapes of one simply connected sheet whose chart is one-to-one (discs,
-//! bowls and strips: the heart wall, placenta, leaflets, cmrep's t001); branching shapes
-//! (sheets meeting at seams, found by [`branching::branching`]) are refused with their counts.
+//! bowls and strips: the heart wall, placenta, leaflets, cmrep's t001). A branching shape
+//! (sheets meeting at seams, found by [`branching::branching`], the paper's toy) is built sheet
+//! by sheet: each sheet by steps 3–5 on its own medial points and those of its seams; each seam
+//! a polyline through its points ([`seam::Seam`]), clipped to where the sheets reach along it
+//! and sampled at the sheets' lattice spacing; the sheets stitched along it ([`stitch`]): each
+//! sheet's vertices within a band of the seam dropped, the band between the cut and the seam
+//! triangulated by a zipper, so that every seam edge is in three triangles. Several sheets
+//! without a seam are refused with their counts.
 
 pub mod branching;
 pub mod chart;
@@ -30,15 +36,19 @@ pub mod disc;
 pub mod lattice;
 pub mod region;
 pub mod ridge;
+pub mod seam;
+pub mod stitch;
 
 use crate::build::inflate::MedialSheet;
 use crate::image::Volume;
 use crate::{Error, Result, Vec3};
-use branching::{branching, Branching};
+use branching::{branching, Branches, Branching};
 use chart::Chart;
 use disc::{lattice_sheet, ChartedCloud};
 use lattice::Lattice;
 use region::Region;
+use seam::Seam;
+use stitch::{free_edges, stitch, CUT_RADII, CUT_SPACINGS};
 
 pub use ridge::{medial_points, MedialPoint};
 
@@ -73,15 +83,13 @@ const MAX_CHART_ANGLE_DEG: f64 = 160.0;
 /// covers about `V·(√3/2)·d²`.
 const LATTICE_AREA: f64 = 0.866_025_403_784_438_6;
 
-/// What [`sheet_of_mask`] built.
+/// A seam ends where the vertices of its sheets within this many lattice spacings of it end
+/// along it ([`clipped`]).
+const REACH_SPACINGS: f64 = 2.0;
+
+/// How one sheet of a [`ShapeSheet`] was sampled.
 #[derive(Clone, Debug)]
-pub struct ShapeSheet {
-    /// The sheet (coarse: Loop-subdivide it once before inflating, as the paper does).
-    pub sheet: MedialSheet,
-    /// The medial points found (after dropping islands).
-    pub medial_points: Vec<MedialPoint>,
-    /// How many of them were kept as not on spurs (`ChartedCloud::new`).
-    pub spur_free_points: usize,
+pub struct SheetLattice {
     /// The chart the sheet was sampled in.
     pub chart: Chart,
     /// Rows of the lattice hexagon either side of its middle row ([`Lattice::new`]).
@@ -89,56 +97,232 @@ pub struct ShapeSheet {
     /// How many edges the hexagon is stretched by along its middle row (0: a regular hexagon,
     /// a round sheet; more for a long one).
     pub stretch: usize,
-    /// The sheet's points on its free edge, in order round it.
+}
+
+/// What [`sheet_of_mask`] built.
+#[derive(Clone, Debug)]
+pub struct ShapeSheet {
+    /// The sheet (coarse: Loop-subdivide it once before inflating, as the paper does); for a
+    /// branching shape its sheets stitched along the seams, whose vertices come first.
+    pub sheet: MedialSheet,
+    /// The medial points found (after dropping islands).
+    pub medial_points: Vec<MedialPoint>,
+    /// How many of them were kept as not on spurs (`ChartedCloud::new`), over all sheets.
+    pub spur_free_points: usize,
+    /// How each sheet was sampled.
+    pub lattices: Vec<SheetLattice>,
+    /// The sheet's points on its free edges: in order round it for a single sheet, ascending
+    /// for several.
     pub border: Vec<usize>,
-    /// The sheets and seams of the medial points (one sheet, no seam: others are refused).
+    /// The seams as sampled: their vertices are the sheet's first, seam after seam.
+    pub seams: Vec<Seam>,
+    /// The sheets and seams of the medial points.
     pub branching: Branching,
 }
 
 /// The medial sheet of the shape `mask` (voxels > ½ inside, on a grid with orthogonal axes and
 /// a background border), sampled as `sampling` says (see the module documentation).
 ///
-/// Errors: those of [`medial_points`]; [`Error::Branching`] for a shape of several sheets or
-/// with seams ([`branching()`]); those of [`Chart::fit`], the chart's region and its harmonic
-/// map and `lattice_sheet` (a shape that is not one simply connected sheet);
-/// `InvalidParameter` for a non-positive sampling.
+/// A shape of one sheet gets one lattice sheet. A branching shape (sheets meeting at seams,
+/// [`branching()`]) gets one per sheet, each on the sheet's medial points and those of the
+/// seams it reaches, and the seams as polylines ([`Seam::fit`]) sampled as finely as the
+/// sheets' lattices (their mean spacing); the sheets are stitched along them ([`stitch`]).
+///
+/// Errors: those of [`medial_points`]; [`Error::Branching`] for a shape of several sheets
+/// without seams; those of [`Chart::fit`], the chart's region and its harmonic map,
+/// `lattice_sheet` (a shape that is not one simply connected sheet), [`Seam::fit`] and
+/// [`stitch`]; `InvalidParameter` for a non-positive sampling.
 pub fn sheet_of_mask(mask: &Volume, sampling: Sampling) -> Result<ShapeSheet> {
     let points = medial_points(mask, MIN_FEATURE_ANGLE_DEG)?;
     let voxel = mask.spacing().mean();
-    let branching = branching(&points, voxel);
-    if branching.sheets != 1 || branching.seams != 0 {
+    let branches = branching(&points, voxel);
+    let counts = branches.counts;
+    if counts.seams > 0 {
+        return several_sheets(points, &branches, voxel, sampling);
+    }
+    if counts.sheets != 1 {
         return Err(Error::Branching {
-            sheets: branching.sheets,
-            seams: branching.seams,
+            sheets: counts.sheets,
+            seams: counts.seams,
         });
     }
-    let positions: Vec<_> = points.iter().map(|p| p.position).collect();
-    let chart = Chart::fit(&positions)?;
-    let cell = CELL_VOXELS * voxel;
-    // A first region, of every point, sets the sampling and the window; the sheet is fitted
-    // to the points without spurs.
-    let all = ChartedCloud::new(&points, &chart, None);
-    let lift = |q: [f64; 2]| chart.on_surface(q);
-    let first = Region::of(&usable(&chart, &all), cell, 1, &lift)?;
+    let charted = ChartedSheet::new(points.clone(), voxel)?;
+    let first = &charted.first;
     let (rings, stretch) = lattice_of(sampling, first.area(), first.elongation())?;
-    let lattice = Lattice::new(rings, stretch);
-    let spacing = (first.area() / (lattice.points.len() as f64 * LATTICE_AREA)).sqrt();
-    let window = (3.0 * voxel).max(0.5 * spacing);
-    let cloud = ChartedCloud::new(&points, &chart, Some(window));
-    let closing = (window / cell).ceil() as usize;
-    let region = Region::of(&usable(&chart, &cloud), cell, closing, &lift)?;
-    let in_chart = region.map_onto(&lattice)?;
-    let sheet = lattice_sheet(&cloud, &lattice, &in_chart, window, voxel)?;
+    let built = charted.sampled(rings, stretch)?;
     Ok(ShapeSheet {
-        sheet,
-        spur_free_points: cloud.len(),
+        sheet: built.sheet,
+        spur_free_points: built.spur_free_points,
         medial_points: points,
-        chart,
-        rings,
-        stretch,
-        border: lattice.border,
-        branching,
+        lattices: vec![built.lattice],
+        border: built.border,
+        seams: Vec::new(),
+        branching: counts,
     })
+}
+
+/// The stitched sheet of a branching shape (see [`sheet_of_mask`]): the atoms asked for
+/// shared over the sheets by area, `s = √(A/((√3/2)·n))` for `n` atoms over the sheets' total
+/// area `A` less the bands of width [`CUT_RADII`]` · r̄` along each side of a seam (`r̄` its
+/// mean radius), which the stitching fills with the seam's vertices (at least a quarter of
+/// the area is kept).
+fn several_sheets(
+    points: Vec<MedialPoint>,
+    branches: &Branches,
+    voxel: f64,
+    sampling: Sampling,
+) -> Result<ShapeSheet> {
+    let of =
+        |indices: &[usize]| -> Vec<MedialPoint> { indices.iter().map(|&i| points[i]).collect() };
+    let counts = branches.counts;
+    let seams = (0..counts.seams)
+        .map(|s| Seam::fit(&of(&branches.seam_points(s)), voxel))
+        .collect::<Result<Vec<_>>>()?;
+    let charted = (0..counts.sheets)
+        .map(|k| {
+            let mut own = branches.sheet_points(k);
+            for (s, on) in branches.seam_sheets.iter().enumerate() {
+                if on.contains(&k) {
+                    own.extend(branches.seam_points(s));
+                }
+            }
+            ChartedSheet::new(of(&own), voxel)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    // The bands along the seams that the stitching cuts off and fills with the seam's own
+    // vertices hold no lattice points.
+    let bands: f64 = (seams.iter().zip(&branches.seam_sheets))
+        .map(|(seam, on)| on.len() as f64 * CUT_RADII * seam.mean_radius() * seam.length())
+        .sum();
+    let area: f64 = charted.iter().map(|c| c.first.area()).sum();
+    let spacing = Sampling::Spacing(atom_spacing(sampling, (area - bands).max(area / 4.0))?);
+    let built = (charted.iter())
+        .map(|c| {
+            let (rings, stretch) = lattice_of(spacing, c.first.area(), c.first.elongation())?;
+            c.sampled(rings, stretch)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let lattice_spacing = built.iter().map(|b| b.spacing).sum::<f64>() / built.len() as f64;
+    let sheets: Vec<MedialSheet> = built.iter().map(|b| b.sheet.clone()).collect();
+    let seams: Vec<Seam> = (seams.iter().zip(&branches.seam_sheets))
+        .map(|(seam, on)| {
+            let along: Vec<&MedialSheet> = on.iter().map(|&k| &sheets[k]).collect();
+            clipped(seam, &along, REACH_SPACINGS * lattice_spacing).resampled(lattice_spacing)
+        })
+        .collect();
+    let sheet = stitch(&sheets, &seams, CUT_SPACINGS * lattice_spacing)?;
+    Ok(ShapeSheet {
+        border: free_edge_points(&sheet),
+        sheet,
+        spur_free_points: built.iter().map(|b| b.spur_free_points).sum(),
+        medial_points: points,
+        lattices: built.into_iter().map(|b| b.lattice).collect(),
+        seams,
+        branching: counts,
+    })
+}
+
+/// `seam` clipped to where the sheets `along` it reach: between the means over the sheets of
+/// the least and the greatest arc length along it ([`Seam::arc_of`]) of their vertices within
+/// `reach` mm of it (a sheet without any leaves the seam whole).
+fn clipped(seam: &Seam, along: &[&MedialSheet], reach: f64) -> Seam {
+    let ends: Vec<[f64; 2]> = (along.iter())
+        .map(|sheet| {
+            let arcs = (sheet.points().iter())
+                .filter(|p| seam.distance(p) <= reach)
+                .map(|p| seam.arc_of(p));
+            arcs.fold([seam.length(), 0.0], |[lo, hi], s| [lo.min(s), hi.max(s)])
+        })
+        .map(|[lo, hi]| {
+            if lo <= hi {
+                [lo, hi]
+            } else {
+                [0.0, seam.length()]
+            }
+        })
+        .collect();
+    let mean = |k: usize| ends.iter().map(|e| e[k]).sum::<f64>() / ends.len() as f64;
+    seam.between(mean(0), mean(1))
+}
+
+/// The points of `sheet` on an edge of one triangle, ascending.
+fn free_edge_points(sheet: &MedialSheet) -> Vec<usize> {
+    let mut free: Vec<usize> = (free_edges(sheet.triangles()).into_iter())
+        .flat_map(|(u, v)| [u, v])
+        .collect();
+    free.sort_unstable();
+    free.dedup();
+    free
+}
+
+/// The medial points of one sheet in its chart, with the region they cover there on a first
+/// grid (closed by one cell), which sets the sampling.
+struct ChartedSheet {
+    points: Vec<MedialPoint>,
+    chart: Chart,
+    first: Region,
+    voxel: f64,
+}
+
+/// One sheet sampled on a lattice ([`ChartedSheet::sampled`]).
+struct SampledSheet {
+    sheet: MedialSheet,
+    lattice: SheetLattice,
+    /// The lattice's points on its border, in order round it.
+    border: Vec<usize>,
+    /// The lattice's mean spacing on the sheet (mm).
+    spacing: f64,
+    spur_free_points: usize,
+}
+
+impl ChartedSheet {
+    /// The chart of `points` (medial points of a mask of mean voxel `voxel`, mm) and their
+    /// first region: every point, cells of [`CELL_VOXELS`], closed by one cell.
+    ///
+    /// Errors: those of [`Chart::fit`] and [`Region::of`].
+    fn new(points: Vec<MedialPoint>, voxel: f64) -> Result<Self> {
+        let positions: Vec<_> = points.iter().map(|p| p.position).collect();
+        let chart = Chart::fit(&positions)?;
+        let all = ChartedCloud::new(&points, &chart, None);
+        let lift = |q: [f64; 2]| chart.on_surface(q);
+        let first = Region::of(&usable(&chart, &all), CELL_VOXELS * voxel, 1, &lift)?;
+        Ok(Self {
+            points,
+            chart,
+            first,
+            voxel,
+        })
+    }
+
+    /// The sheet on the hexagon of `rings` and `stretch`: the first region sets the lattice's
+    /// spacing and the fits' window (`max(3 voxels, spacing/2)`); the sheet is fitted to the
+    /// points without spurs, on the region of those closed by the window.
+    ///
+    /// Errors: those of [`Region::of`], [`Region::map_onto`] and `lattice_sheet`.
+    fn sampled(&self, rings: usize, stretch: usize) -> Result<SampledSheet> {
+        let (chart, voxel) = (&self.chart, self.voxel);
+        let cell = CELL_VOXELS * voxel;
+        let lattice = Lattice::new(rings, stretch);
+        let spacing = (self.first.area() / (lattice.points.len() as f64 * LATTICE_AREA)).sqrt();
+        let window = (3.0 * voxel).max(0.5 * spacing);
+        let cloud = ChartedCloud::new(&self.points, chart, Some(window));
+        let closing = (window / cell).ceil() as usize;
+        let lift = |q: [f64; 2]| chart.on_surface(q);
+        let region = Region::of(&usable(chart, &cloud), cell, closing, &lift)?;
+        let in_chart = region.map_onto(&lattice)?;
+        let sheet = lattice_sheet(&cloud, &lattice, &in_chart, window, voxel)?;
+        Ok(SampledSheet {
+            sheet,
+            lattice: SheetLattice {
+                chart: *chart,
+                rings,
+                stretch,
+            },
+            border: lattice.border,
+            spacing,
+            spur_free_points: cloud.len(),
+        })
+    }
 }
 
 /// The points of `cloud` (chart coordinates, position) within [`MAX_CHART_ANGLE_DEG`] of the
@@ -159,14 +343,27 @@ fn lattice_of(sampling: Sampling, area: f64, elongation: f64) -> Result<(usize, 
     let points = match sampling {
         Sampling::Atoms(n) if n > 0 => n as f64 / 4.0,
         Sampling::Spacing(s) if s.is_finite() && s > 0.0 => area / (LATTICE_AREA * 4.0 * s * s),
-        _ => {
-            return Err(Error::InvalidParameter(format!(
-                "the sampling of a medial sheet must be positive, got {sampling:?}"
-            )))
-        }
+        _ => return Err(non_positive(sampling)),
     };
     let ratio = Lattice::stretch_ratio(elongation);
     let rings = ((points / (3.0 + 2.0 * ratio)).sqrt().round() as usize).clamp(2, 64);
     let stretch = ((ratio * rings as f64).round() as usize).min(16 * rings);
     Ok((rings, stretch))
+}
+
+/// The distance between atoms (mm) for `sampling` over sheets of total area `area` (mm²):
+/// `√(A/((√3/2)·n))` for `n` atoms (a lattice of `n/4` points spaced `2s` covers `A`).
+fn atom_spacing(sampling: Sampling, area: f64) -> Result<f64> {
+    match sampling {
+        Sampling::Atoms(n) if n > 0 => Ok((area / (LATTICE_AREA * n as f64)).sqrt()),
+        Sampling::Spacing(s) if s.is_finite() && s > 0.0 => Ok(s),
+        _ => Err(non_positive(sampling)),
+    }
+}
+
+/// The error for a sampling that is not positive.
+fn non_positive(sampling: Sampling) -> Error {
+    Error::InvalidParameter(format!(
+        "the sampling of a medial sheet must be positive, got {sampling:?}"
+    ))
 }

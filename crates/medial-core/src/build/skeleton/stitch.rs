@@ -1,0 +1,440 @@
+//! Sheets built separately, stitched along the seams where they meet: the part of each sheet
+//! that reaches over a seam is cut off, and the band between the cut and the seam's polyline
+//! is triangulated, so that every seam edge is in exactly three triangles (one per sheet), the
+//! non-manifold sheet [`inflate`](crate::build::inflate()) takes.
+
+use std::collections::{HashMap, HashSet};
+
+use super::seam::Seam;
+use crate::build::inflate::MedialSheet;
+use crate::{Error, Result, Vec3};
+
+/// A sheet's vertices within this many lattice spacings of a seam are cut off: the sheet's own
+/// border row along the seam (on it or just beyond, where the local fits extrapolate), so
+/// that the band to the seam is about one spacing wide.
+pub const CUT_SPACINGS: f64 = 0.5;
+
+/// A sheet's vertices within this many seam radii of a seam are cut off too. Where three
+/// sheets meet at 120°, the seam's spoke of radius `r` into the region between two of them
+/// (along its bisector) ends `r·cos 60° = r/2` along either sheet from the seam, while a
+/// sheet's spokes end over the sheet's point: the boundary folds over unless the sheet's
+/// points next to the seam, after one subdivision about half way across the band, are more
+/// than `r/2` from it, so the band must be wider than `r`: with 1.2 the toy's mesh folds there
+/// (its subdivided band points came `0.50·r` from the seam); 1.6 leaves a margin.
+pub const CUT_RADII: f64 = 1.6;
+
+/// The sheets `sheets` (each a triangulated disc, consistently oriented) stitched along the
+/// seams `seams` (polylines sampled about as finely as the sheets), with `cut` (mm) the
+/// distance from a seam within which a sheet's vertices are dropped. The stitched sheet's
+/// points are the seams' vertices, seam after seam, then each sheet's kept vertices, sheet
+/// after sheet; its triangles keep each sheet's orientation.
+///
+/// For every sheet: the vertices within `cut` of a seam or [`CUT_RADII`] times its radius
+/// there are dropped with their triangles; its free edges form loops; the longest run of
+/// consecutive loop vertices that lost a triangle and are nearest to seam `s` is the cut along
+/// `s`, zipped to `s` ([`zip`]). Then the ears are dropped ([`drop_ears`]) and the points no
+/// triangle uses (the order of the others kept).
+///
+/// Errors: `InvalidVolume` when a sheet's free edges do not form simple loops after the cut
+/// (it fell apart) or a seam has no sheet along it; those of [`MedialSheet::new`] (an edge in
+/// more than three triangles: more than three sheets at a seam).
+pub fn stitch(sheets: &[MedialSheet], seams: &[Seam], cut: f64) -> Result<MedialSheet> {
+    let mut points: Vec<Vec3> = seams.iter().flat_map(|s| s.points.clone()).collect();
+    let mut radius: Vec<f64> = seams.iter().flat_map(|s| s.radius.clone()).collect();
+    let mut first = vec![0];
+    for s in seams {
+        first.push(first[first.len() - 1] + s.points.len());
+    }
+    let seam_vertices: Vec<Vec<usize>> = (0..seams.len())
+        .map(|s| (first[s]..first[s + 1]).collect())
+        .collect();
+    let mut triangles = Vec::new();
+    let mut sheets_along = vec![0; seams.len()];
+    for sheet in sheets {
+        let cut_sheet = CutSheet::new(sheet, seams, cut)?;
+        let offset = points.len();
+        let global: HashMap<usize, usize> = (cut_sheet.used.iter().enumerate())
+            .map(|(k, &v)| (v, offset + k))
+            .collect();
+        points.extend(cut_sheet.used.iter().map(|&v| sheet.points()[v]));
+        radius.extend(cut_sheet.used.iter().map(|&v| sheet.radius()[v]));
+        triangles.extend(cut_sheet.triangles.iter().map(|t| t.map(|v| global[&v])));
+        for (s, seam) in seams.iter().enumerate() {
+            let Some(run) = cut_sheet.run_along(s, sheet, seams) else {
+                continue;
+            };
+            sheets_along[s] += 1;
+            let run: Vec<usize> = run.iter().map(|v| global[v]).collect();
+            let along_run = points[run[run.len() - 1]] - points[run[0]];
+            let mut b = seam_vertices[s].clone();
+            if along_run.dot(&(seam.points[seam.points.len() - 1] - seam.points[0])) < 0.0 {
+                b.reverse();
+            }
+            zip(&run, &b, &points, &mut triangles);
+        }
+    }
+    if let Some(s) = sheets_along.iter().position(|&n| n == 0) {
+        return Err(Error::InvalidVolume(format!(
+            "no medial sheet reaches seam {s}: nothing to stitch along it"
+        )));
+    }
+    drop_ears(&mut triangles);
+    let (points, triangles, radius) = used_only(points, &triangles, radius);
+    MedialSheet::new(points, triangles, radius)
+}
+
+/// Drops the triangles with two or three free edges (ears: inflation refuses them, their
+/// sides would collapse), again until none is left: the corners of a sheet cut across where
+/// the cut meets its free edge. (Dropped before zipping they would eat a narrow strip left by
+/// the cut from its ends, each triangle's cut edge being free then.)
+fn drop_ears(triangles: &mut Vec<[usize; 3]>) {
+    loop {
+        let free = free_edges(triangles);
+        let before = triangles.len();
+        triangles.retain(|t| {
+            let on_free = (0..3).filter(|&k| free.contains(&(t[k], t[(k + 1) % 3])));
+            on_free.count() < 2
+        });
+        if triangles.len() == before {
+            return;
+        }
+    }
+}
+
+/// The points (and radii) that `triangles` use, in their order, and the triangles renumbered.
+fn used_only(
+    points: Vec<Vec3>,
+    triangles: &[[usize; 3]],
+    radius: Vec<f64>,
+) -> (Vec<Vec3>, Vec<[usize; 3]>, Vec<f64>) {
+    let mut used = vec![false; points.len()];
+    triangles.iter().flatten().for_each(|&v| used[v] = true);
+    let mut number = vec![0; points.len()];
+    let mut next = 0;
+    for (v, &u) in used.iter().enumerate() {
+        number[v] = next;
+        next += usize::from(u);
+    }
+    let keep = |v: &usize| used[*v];
+    let points = (0..points.len()).filter(keep).map(|v| points[v]).collect();
+    let radius = (0..radius.len()).filter(keep).map(|v| radius[v]).collect();
+    let triangles = triangles.iter().map(|t| t.map(|v| number[v])).collect();
+    (points, triangles, radius)
+}
+
+/// Triangulates the band between the cut `a` (a run of a sheet's free edge, in the direction
+/// its triangles run along it) and the seam polyline `b` (in the same direction along the
+/// seam), advancing along whichever of the two the shorter diagonal says (the greedy
+/// 'zipper'): `[a_{i+1}, a_i, b_j]` when `|a_{i+1} − b_j| ≤ |a_i − b_{j+1}|`, else
+/// `[a_i, b_j, b_{j+1}]`, until both ends are reached. The new triangles run along `a` against
+/// the sheet's (so the sheet's orientation is kept) and use every edge of `b` once.
+pub fn zip(a: &[usize], b: &[usize], points: &[Vec3], triangles: &mut Vec<[usize; 3]>) {
+    let (m, n) = (a.len(), b.len());
+    let (mut i, mut j) = (0, 0);
+    let d = |u: usize, v: usize| (points[u] - points[v]).norm();
+    while i + 1 < m || j + 1 < n {
+        let along_a = j + 1 == n || (i + 1 < m && d(a[i + 1], b[j]) <= d(a[i], b[j + 1]));
+        if along_a {
+            triangles.push([a[i + 1], a[i], b[j]]);
+            i += 1;
+        } else {
+            triangles.push([a[i], b[j], b[j + 1]]);
+            j += 1;
+        }
+    }
+}
+
+/// A sheet with its part over the seams cut off.
+struct CutSheet {
+    /// The triangles kept (the sheet's vertex indices).
+    triangles: Vec<[usize; 3]>,
+    /// The vertices they use, ascending.
+    used: Vec<usize>,
+    /// The free edges' loops, each in the direction its triangles run along it.
+    loops: Vec<Vec<usize>>,
+    /// The kept vertices that lost a triangle to the cut.
+    cut: HashSet<usize>,
+}
+
+impl CutSheet {
+    /// `sheet` less its vertices within `cut` of a seam and their triangles.
+    ///
+    /// Errors: `InvalidVolume` when the free edges left do not form simple loops.
+    fn new(sheet: &MedialSheet, seams: &[Seam], cut: f64) -> Result<Self> {
+        let near_seam: Vec<bool> = (sheet.points().iter())
+            .map(|p| (seams.iter()).any(|s| s.distance(p) <= cut.max(CUT_RADII * s.radius_near(p))))
+            .collect();
+        let triangles: Vec<[usize; 3]> = (sheet.triangles().iter())
+            .filter(|t| t.iter().all(|&v| !near_seam[v]))
+            .copied()
+            .collect();
+        let kept: HashSet<[usize; 3]> = triangles.iter().copied().collect();
+        let used: HashSet<usize> = triangles.iter().flatten().copied().collect();
+        let cut: HashSet<usize> = (sheet.triangles().iter())
+            .filter(|t| !kept.contains(*t))
+            .flatten()
+            .copied()
+            .filter(|v| used.contains(v))
+            .collect();
+        let mut used: Vec<usize> = used.into_iter().collect();
+        used.sort_unstable();
+        let loops = loops_of(&free_edges(&triangles))?;
+        Ok(Self {
+            triangles,
+            used,
+            loops,
+            cut,
+        })
+    }
+
+    /// The longest run of consecutive vertices of a free-edge loop that lost a triangle to the
+    /// cut and are nearer to seam `s` than to any other; `None` when no such run has two
+    /// vertices (the sheet does not reach the seam).
+    fn run_along(&self, s: usize, sheet: &MedialSheet, seams: &[Seam]) -> Option<Vec<usize>> {
+        let nearest = |v: usize| {
+            let p = &sheet.points()[v];
+            (0..seams.len()).min_by(|&a, &b| seams[a].distance(p).total_cmp(&seams[b].distance(p)))
+                == Some(s)
+        };
+        let best = (self.loops.iter())
+            .filter_map(|l| longest_run(l, |v| self.cut.contains(&v) && nearest(v)))
+            .max_by_key(Vec::len);
+        best.filter(|run| run.len() >= 2)
+    }
+}
+
+/// The free edges of `triangles` (edges in one triangle), in the direction their triangle
+/// runs.
+pub(super) fn free_edges(triangles: &[[usize; 3]]) -> HashSet<(usize, usize)> {
+    let mut count: HashMap<(usize, usize), usize> = HashMap::new();
+    for t in triangles {
+        for k in 0..3 {
+            let (u, v) = (t[k], t[(k + 1) % 3]);
+            *count.entry((u.min(v), u.max(v))).or_default() += 1;
+        }
+    }
+    (triangles.iter())
+        .flat_map(|t| (0..3).map(move |k| (t[k], t[(k + 1) % 3])))
+        .filter(|&(u, v)| count[&(u.min(v), u.max(v))] == 1)
+        .collect()
+}
+
+/// The loops of the directed free edges `free`; `InvalidVolume` when a vertex starts two.
+fn loops_of(free: &HashSet<(usize, usize)>) -> Result<Vec<Vec<usize>>> {
+    let mut next: HashMap<usize, usize> = HashMap::new();
+    for &(u, v) in free {
+        if next.insert(u, v).is_some() {
+            return Err(Error::InvalidVolume(format!(
+                "a medial sheet cut at a seam is pinched at its vertex {u}: two of its free \
+                 edges start there"
+            )));
+        }
+    }
+    let mut starts: Vec<usize> = next.keys().copied().collect();
+    starts.sort_unstable();
+    let mut seen = HashSet::new();
+    let mut loops = Vec::new();
+    for start in starts {
+        let mut l = Vec::new();
+        let mut v = start;
+        while seen.insert(v) {
+            l.push(v);
+            v = next[&v];
+        }
+        if !l.is_empty() {
+            loops.push(l);
+        }
+    }
+    Ok(loops)
+}
+
+/// The longest run of consecutive vertices of the cyclic `loop_` that satisfy `on` (the whole
+/// loop when all do), in the loop's order; `None` when none does.
+fn longest_run(loop_: &[usize], on: impl Fn(usize) -> bool) -> Option<Vec<usize>> {
+    let n = loop_.len();
+    let flags: Vec<bool> = loop_.iter().map(|&v| on(v)).collect();
+    if flags.iter().all(|&f| f) {
+        return Some(loop_.to_vec());
+    }
+    // Start just after a vertex that is off, so that no run wraps past the start.
+    let start = (0..n).find(|&k| !flags[k])? + 1;
+    let mut best: Vec<usize> = Vec::new();
+    let mut current = Vec::new();
+    for k in 0..n {
+        let i = (start + k) % n;
+        if flags[i] {
+            current.push(loop_[i]);
+            if current.len() > best.len() {
+                best = current.clone();
+            }
+        } else {
+            current.clear();
+        }
+    }
+    (!best.is_empty()).then_some(best)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::lattice::Lattice;
+    use super::*;
+    use crate::build::inflate::inflate;
+    use std::collections::BTreeMap;
+
+    /// Three fins at 120° about the z axis, each a lattice sheet of spacing 1 and `rings` rings
+    /// reaching `over` mm across the axis (as a sheet fitted to its points and the seam's does),
+    /// its triangles reversed on the second (the stitching keeps either orientation); and the
+    /// seam, the z axis over the lattices' length, radius `seam_radius`.
+    fn fins(rings: usize, over: f64, seam_radius: f64) -> (Vec<MedialSheet>, Seam) {
+        let lattice = Lattice::new(rings, 8);
+        let lo = lattice
+            .points
+            .iter()
+            .map(|p| p[1])
+            .fold(f64::INFINITY, f64::min);
+        let sheets = (0..3)
+            .map(|s| {
+                let a = (90.0 + 120.0 * s as f64).to_radians();
+                let u = Vec3::new(a.cos(), a.sin(), 0.0);
+                let points: Vec<Vec3> = (lattice.points.iter())
+                    .map(|p| (p[1] - lo - over) * u + Vec3::new(0.0, 0.0, p[0]))
+                    .collect();
+                let radius = points.iter().map(|p| 1.0 - 0.02 * p.xy().norm()).collect();
+                let mut triangles = lattice.triangles.clone();
+                if s == 1 {
+                    triangles.iter_mut().for_each(|t| t.swap(1, 2));
+                }
+                MedialSheet::new(points, triangles, radius).unwrap()
+            })
+            .collect();
+        let half = lattice.points.iter().map(|p| p[0]).fold(0.0, f64::max);
+        let seam = Seam {
+            points: vec![Vec3::new(0.0, 0.0, -half), Vec3::new(0.0, 0.0, half)],
+            radius: vec![seam_radius; 2],
+        }
+        .resampled(1.0);
+        (sheets, seam)
+    }
+
+    /// The undirected edges of `triangles` with how often each runs each way.
+    fn directed(triangles: &[[usize; 3]]) -> BTreeMap<(usize, usize), [usize; 2]> {
+        let mut count: BTreeMap<(usize, usize), [usize; 2]> = BTreeMap::new();
+        for t in triangles {
+            for k in 0..3 {
+                let (u, v) = (t[k], t[(k + 1) % 3]);
+                count.entry((u.min(v), u.max(v))).or_default()[usize::from(u > v)] += 1;
+            }
+        }
+        count
+    }
+
+    #[test]
+    fn three_fins_stitched_share_every_seam_edge_and_keep_their_orientation() {
+        let (sheets, seam) = fins(3, 0.3, 1.0);
+        let stitched = stitch(&sheets, std::slice::from_ref(&seam), 0.5).unwrap();
+        check_stitched(&stitched, &seam);
+        // No vertex within the cut of the seam but the seam's, and the result inflates.
+        for p in &stitched.points()[seam.points.len()..] {
+            assert!(seam.distance(p) > CUT_RADII, "{p}");
+        }
+        inflate(&stitched.loop_subdivide().unwrap()).expect("an inflatable sheet");
+    }
+
+    #[test]
+    fn a_narrow_strip_left_by_the_cut_is_stitched_whole() {
+        // A seam of radius 2.6: the cut at 4.16 mm leaves each fin's two outer rows (4.76 and
+        // 5.63 mm out), whose cut edges are free until zipped.
+        let (sheets, seam) = fins(4, 1.3, 2.6);
+        let stitched = stitch(&sheets, std::slice::from_ref(&seam), 0.5).unwrap();
+        check_stitched(&stitched, &seam);
+        let kept: usize = (sheets.iter())
+            .map(|s| {
+                s.points()
+                    .iter()
+                    .filter(|p| seam.distance(p) > CUT_RADII * 2.6)
+                    .count()
+            })
+            .sum();
+        assert_eq!(stitched.points().len(), seam.points.len() + kept);
+    }
+
+    /// Every seam edge of `stitched` (along `seam`, its first vertices) is in exactly three
+    /// triangles, every other edge in at most two, and the three sheets keep their orientation.
+    fn check_stitched(stitched: &MedialSheet, seam: &Seam) {
+        let seam_count = seam.points.len();
+        let triangles = stitched.triangles();
+        let edges = directed(triangles);
+        for (&(u, v), n) in &edges {
+            let on_seam = u < seam_count && v < seam_count;
+            let total = n[0] + n[1];
+            if on_seam {
+                assert_eq!(v, u + 1, "a seam edge joins consecutive seam vertices");
+                assert_eq!(total, 3, "seam edge {u}–{v}");
+            } else {
+                assert!(total <= 2, "edge {u}–{v} in {total} triangles");
+            }
+        }
+        assert_eq!(
+            (edges.keys())
+                .filter(|(u, v)| *u < seam_count && *v < seam_count)
+                .count(),
+            seam_count - 1,
+            "every seam edge is in the sheet"
+        );
+        // The pieces joined across edges of two triangles are the three sheets; within each an
+        // edge runs at most once each way (orientation consistent).
+        let mut pieces = crate::build::inflate::UnionFind::new(triangles.len());
+        let mut by_edge: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
+        for (i, t) in triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (u, v) = (t[k], t[(k + 1) % 3]);
+                by_edge.entry((u.min(v), u.max(v))).or_default().push(i);
+            }
+        }
+        for tris in by_edge.values() {
+            if let [a, b] = tris[..] {
+                pieces.union(a, b);
+            }
+        }
+        let mut sheets_of: BTreeMap<usize, Vec<[usize; 3]>> = BTreeMap::new();
+        for (i, t) in triangles.iter().enumerate() {
+            sheets_of.entry(pieces.find(i)).or_default().push(*t);
+        }
+        assert_eq!(sheets_of.len(), 3);
+        for piece in sheets_of.values() {
+            assert!(directed(piece).values().all(|n| n[0] <= 1 && n[1] <= 1));
+        }
+    }
+
+    #[test]
+    fn the_zipper_uses_every_edge_of_both_polylines_once() {
+        // A run of 4 points above a polyline of 6 along x.
+        let mut points: Vec<Vec3> = (0..4).map(|i| Vec3::new(i as f64, 1.0, 0.0)).collect();
+        points.extend((0..6).map(|j| Vec3::new(0.6 * j as f64, 0.0, 0.0)));
+        let (a, b): (Vec<usize>, Vec<usize>) = ((0..4).collect(), (4..10).collect());
+        let mut triangles = Vec::new();
+        zip(&a, &b, &points, &mut triangles);
+        assert_eq!(triangles.len(), 3 + 5);
+        let edges = directed(&triangles);
+        for w in a.windows(2) {
+            assert_eq!(
+                edges[&(w[0], w[1])],
+                [0, 1],
+                "the run is used against its direction"
+            );
+        }
+        for w in b.windows(2) {
+            assert_eq!(
+                edges[&(w[0], w[1])],
+                [1, 0],
+                "the polyline along its direction"
+            );
+        }
+        // Counter-clockwise seen from +z, as a sheet above the run (y > 1) whose triangles run
+        // along it in +x is.
+        for t in &triangles {
+            let [p, q, r] = t.map(|k| points[k]);
+            assert!((q - p).cross(&(r - p)).z > 0.0, "{t:?}");
+        }
+    }
+}
