@@ -25,7 +25,7 @@
 //! (sheets meeting at seams, found by [`branching::branching`], the paper's toy) is built sheet
 //! by sheet: each sheet by steps 3–5 on its own medial points and those of its seams; each seam
 //! a polyline through its points ([`seam::Seam`]), clipped to where the sheets reach along it
-//! and sampled at the sheets' lattice spacing; the sheets stitched along it ([`stitch`]): each
+//! and sampled at the sheets' lattice spacing; the sheets stitched along it ([`mod@stitch`]): each
 //! sheet's vertices within a band of the seam dropped, the band between the cut and the seam
 //! triangulated by a zipper, so that every seam edge is in three triangles. Several sheets
 //! without a seam are refused with their counts.
@@ -126,12 +126,12 @@ pub struct ShapeSheet {
 /// A shape of one sheet gets one lattice sheet. A branching shape (sheets meeting at seams,
 /// [`branching()`]) gets one per sheet, each on the sheet's medial points and those of the
 /// seams it reaches, and the seams as polylines ([`Seam::fit`]) sampled as finely as the
-/// sheets' lattices (their mean spacing); the sheets are stitched along them ([`stitch`]).
+/// sheets' lattices (their mean spacing); the sheets are stitched along them ([`stitch()`]).
 ///
 /// Errors: those of [`medial_points`]; [`Error::Branching`] for a shape of several sheets
 /// without seams; those of [`Chart::fit`], the chart's region and its harmonic map,
 /// `lattice_sheet` (a shape that is not one simply connected sheet), [`Seam::fit`] and
-/// [`stitch`]; `InvalidParameter` for a non-positive sampling.
+/// [`stitch()`]; `InvalidParameter` for a non-positive sampling.
 pub fn sheet_of_mask(mask: &Volume, sampling: Sampling) -> Result<ShapeSheet> {
     let points = medial_points(mask, MIN_FEATURE_ANGLE_DEG)?;
     let voxel = mask.spacing().mean();

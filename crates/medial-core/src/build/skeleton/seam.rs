@@ -24,7 +24,7 @@ pub struct Seam {
 impl Seam {
     /// The seam through the medial points `points` (those of one seam) of a mask of mean
     /// voxel `voxel` (mm): with `d` the principal direction of the points and `t = (p − p̄)·d`,
-    /// the mean position and radius of the points in each bin of `t` of [`BIN_VOXELS`] voxels
+    /// the mean position and radius of the points in each bin of `t` of `BIN_VOXELS` voxels
     /// (empty bins skipped), smoothed by a moving mean over `2·SMOOTHING_BINS + 1` bins (the
     /// window shifted inside at the ends) across the seam, each bin kept at its own place
     /// along `d`, and in radius (the window narrowed at the ends), then trimmed at each end while the radius

@@ -32,7 +32,7 @@ pub const CUT_RADII: f64 = 1.6;
 /// For every sheet: the vertices within `cut` of a seam or [`CUT_RADII`] times its radius
 /// there are dropped with their triangles; its free edges form loops; the longest run of
 /// consecutive loop vertices that lost a triangle and are nearest to seam `s` is the cut along
-/// `s`, zipped to `s` ([`zip`]). Then the ears are dropped ([`drop_ears`]) and the points no
+/// `s`, zipped to `s` ([`zip`]). Then the ears are dropped (`drop_ears`) and the points no
 /// triangle uses (the order of the others kept).
 ///
 /// Errors: `InvalidVolume` when a sheet's free edges do not form simple loops after the cut
