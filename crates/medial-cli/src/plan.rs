@@ -280,9 +280,10 @@ struct Automatic {
     surface: Schedule,
     /// The second varifold stage, at the narrower kernel: μ = 2000, 20000, the first AL
     /// iteration up to 300 iterations, the second up to 150, both under the progress rule.
-    /// Measured on the placenta (cmrep's sheet inflated, against its deformed template): after
-    /// the first stage's 0.735 mm to the surface, a quarter of the width ends at 0.544 mm, half
-    /// of it at 0.635 mm (2 × 300 from μ = 2000 each, 620 evaluations).
+    /// The width (a quarter of the first stage's) was chosen with the previous schedule and an
+    /// earlier flow kernel on the placenta (cmrep's sheet inflated, against its deformed
+    /// template): after the first stage's 0.735 mm to the surface, a quarter of the width ended
+    /// at 0.544 mm, half of it at 0.635 mm (2 × 300 from μ = 2000 each, 620 evaluations).
     surface_fine: Schedule,
 }
 

@@ -44,8 +44,8 @@ pub struct AlSchedule {
     /// The L-BFGS budget of the first AL iteration, where the shape is matched under the
     /// weakest penalty (none: [`LbfgsOptions::max_iterations`] like the others), iterations.
     pub first_iterations: Option<usize>,
-    /// Ends the schedule before its last AL iteration once it has settled (none: every AL
-    /// iteration runs).
+    /// Ends the schedule once an AL iteration has settled, before its last (none: every AL
+    /// iteration runs); a last AL iteration that settles marks the stage settled too.
     pub settle: Option<Settle>,
 }
 
