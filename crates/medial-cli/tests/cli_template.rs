@@ -156,6 +156,10 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
             .map(|k| figures["atoms_by_spokes"][k].as_u64().unwrap())
             .collect();
         assert!(by_spokes.iter().all(|&n| n > 0), "{by_spokes:?}");
+        // About the default 300 atoms (252 from the mask and the mesh, 349 from the target:
+        // the sheets' lattices have whole rings).
+        let atoms = figures["atoms"].as_u64().unwrap();
+        assert!((240..=375).contains(&atoms), "{name}: {atoms} atoms for 300");
         // The template file: its seam atoms have three spokes, as many as the figures say.
         let template = medial_io::cmrep::read_template(&out).expect("a cmrep template");
         let three = (0..template.medial_count())

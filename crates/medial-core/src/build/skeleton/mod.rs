@@ -79,6 +79,11 @@ const CELL_VOXELS: f64 = 2.0;
 /// the local fits.
 const MAX_CHART_ANGLE_DEG: f64 = 160.0;
 
+/// How far the stretch of an elongated sheet's hexagon may be from `ρ·rings`, as a fraction of
+/// it, to bring its count nearer the points asked for ([`lattice_of`]): its cells then are up
+/// to 25 % longer or shorter along the middle row than across.
+const STRETCH_SLACK: f64 = 0.25;
+
 /// Row height of the unit triangular lattice, `√3/2`: a lattice of `V` points spaced `d`
 /// covers about `V·(√3/2)·d²`.
 const LATTICE_AREA: f64 = 0.866_025_403_784_438_6;
@@ -165,7 +170,10 @@ pub fn sheet_of_mask(mask: &Volume, sampling: Sampling) -> Result<ShapeSheet> {
 /// shared over the sheets by area, `s = √(A/((√3/2)·n))` for `n` atoms over the sheets' total
 /// area `A` less the bands of width [`CUT_RADII`]` · r̄` along each side of a seam (`r̄` its
 /// mean radius), which the stitching fills with the seam's vertices (at least a quarter of
-/// the area is kept).
+/// the area is kept). For `n` atoms the sheet is sampled again up to [`COUNT_PASSES`] times at
+/// `s·√(a/n)` while its atoms after subdivision `a` are more than [`COUNT_SLACK`] off `n` (a
+/// sheet's lattice has whole rings, and the cut along a seam drops a band of them), and the
+/// sampling nearest `n` in ratio is kept.
 fn several_sheets(
     points: Vec<MedialPoint>,
     branches: &Branches,
@@ -195,31 +203,93 @@ fn several_sheets(
         .map(|(seam, on)| on.len() as f64 * CUT_RADII * seam.mean_radius() * seam.length())
         .sum();
     let area: f64 = charted.iter().map(|c| c.first.area()).sum();
-    let spacing = Sampling::Spacing(atom_spacing(sampling, (area - bands).max(area / 4.0))?);
-    let built = (charted.iter())
-        .map(|c| {
-            let (rings, stretch) = lattice_of(spacing, c.first.area(), c.first.elongation())?;
-            c.sampled(rings, stretch)
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let lattice_spacing = built.iter().map(|b| b.spacing).sum::<f64>() / built.len() as f64;
-    let sheets: Vec<MedialSheet> = built.iter().map(|b| b.sheet.clone()).collect();
-    let seams: Vec<Seam> = (seams.iter().zip(&branches.seam_sheets))
-        .map(|(seam, on)| {
-            let along: Vec<&MedialSheet> = on.iter().map(|&k| &sheets[k]).collect();
-            clipped(seam, &along, REACH_SPACINGS * lattice_spacing).resampled(lattice_spacing)
-        })
-        .collect();
-    let sheet = stitch(&sheets, &seams, CUT_SPACINGS * lattice_spacing)?;
+    let mut spacing = atom_spacing(sampling, (area - bands).max(area / 4.0))?;
+    let sample = |spacing: f64| Stitched::new(&charted, &seams, &branches.seam_sheets, spacing);
+    let mut best = sample(spacing)?;
+    if let Sampling::Atoms(n) = sampling {
+        let off = |s: &Stitched| (s.atoms() as f64 / n as f64).ln().abs();
+        let mut last = best.atoms();
+        for _ in 1..COUNT_PASSES {
+            if off(&best) <= COUNT_SLACK.ln_1p() {
+                break;
+            }
+            spacing *= (last as f64 / n as f64).sqrt();
+            let next = sample(spacing)?;
+            last = next.atoms();
+            if off(&next) < off(&best) {
+                best = next;
+            }
+        }
+    }
     Ok(ShapeSheet {
-        border: free_edge_points(&sheet),
-        sheet,
-        spur_free_points: built.iter().map(|b| b.spur_free_points).sum(),
+        border: free_edge_points(&best.sheet),
+        sheet: best.sheet,
+        spur_free_points: best.built.iter().map(|b| b.spur_free_points).sum(),
         medial_points: points,
-        lattices: built.into_iter().map(|b| b.lattice).collect(),
-        seams,
+        lattices: best.built.into_iter().map(|b| b.lattice).collect(),
+        seams: best.seams,
         branching: counts,
     })
+}
+
+/// How many times at most a branching shape's sheets are sampled to come near the atoms asked
+/// for ([`several_sheets`]).
+const COUNT_PASSES: usize = 3;
+
+/// A branching shape's atoms within this fraction of those asked for are taken at once.
+const COUNT_SLACK: f64 = 0.1;
+
+/// The sheets of a branching shape sampled at one spacing and stitched along its seams.
+struct Stitched {
+    sheet: MedialSheet,
+    built: Vec<SampledSheet>,
+    seams: Vec<Seam>,
+}
+
+impl Stitched {
+    /// Each sheet of `charted` sampled at `spacing` (mm between atoms after subdivision), the
+    /// `seams` (each along the sheets `seam_sheets` says) clipped to where those reach and
+    /// resampled at the lattices' mean spacing, and the sheets stitched along them.
+    ///
+    /// Errors: those of [`lattice_of`], [`ChartedSheet::sampled`] and [`stitch()`].
+    fn new(
+        charted: &[ChartedSheet],
+        seams: &[Seam],
+        seam_sheets: &[Vec<usize>],
+        spacing: f64,
+    ) -> Result<Self> {
+        let built = (charted.iter())
+            .map(|c| {
+                let sampling = Sampling::Spacing(spacing);
+                let (rings, stretch) = lattice_of(sampling, c.first.area(), c.first.elongation())?;
+                c.sampled(rings, stretch)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let lattice_spacing = built.iter().map(|b| b.spacing).sum::<f64>() / built.len() as f64;
+        let sheets: Vec<MedialSheet> = built.iter().map(|b| b.sheet.clone()).collect();
+        let seams: Vec<Seam> = (seams.iter().zip(seam_sheets))
+            .map(|(seam, on)| {
+                let along: Vec<&MedialSheet> = on.iter().map(|&k| &sheets[k]).collect();
+                clipped(seam, &along, REACH_SPACINGS * lattice_spacing).resampled(lattice_spacing)
+            })
+            .collect();
+        let sheet = stitch(&sheets, &seams, CUT_SPACINGS * lattice_spacing)?;
+        Ok(Self {
+            sheet,
+            built,
+            seams,
+        })
+    }
+
+    /// The atoms after one Loop subdivision: a point per vertex and per edge.
+    fn atoms(&self) -> usize {
+        let mut edges: Vec<(usize, usize)> = (self.sheet.triangles().iter())
+            .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
+            .collect();
+        edges.sort_unstable();
+        edges.dedup();
+        self.sheet.points().len() + edges.len()
+    }
 }
 
 /// `seam` clipped to where the sheets `along` it reach: between the means over the sheets of
@@ -336,9 +406,14 @@ fn usable(chart: &Chart, cloud: &ChartedCloud) -> Vec<([f64; 2], Vec3)> {
 }
 
 /// The lattice hexagon (`rings` in 2 ..= 64, `stretch`) for `sampling` on a region of `area`
-/// mm² and elongation `L²/A` ([`Lattice::stretch_ratio`]): about `V` points, `V` a quarter of
-/// the atoms asked for (one Loop subdivision quadruples them) or `area / ((√3/2)(2s)²)` for a
-/// spacing `s` after subdivision, with `V = rings²·(3 + 2ρ)` and `stretch = ρ·rings`.
+/// mm² and elongation `L²/A` ([`Lattice::stretch_ratio`] `ρ`): for `n` atoms, the hexagon
+/// whose atoms after one Loop subdivision (a point per vertex and per edge: `4V − B − 3` for
+/// `V` points, `B = 6·rings + 2·stretch` of them on the border) are nearest `n` in ratio; for a
+/// spacing `s` after subdivision, the one whose `V` is nearest `area / ((√3/2)(2s)²)`. Taken
+/// over the whole rings either side of `√(V/(3 + 2ρ))` (`V ≈ rings²·(3 + 2ρ)`) and, for an
+/// elongated region (`ρ > 0`), the stretches within [`STRETCH_SLACK`] of `ρ·rings` (at least
+/// one edge either way): rounding the rings alone would take 2.6 rings to 3, 1.6 times the
+/// points asked for. A round region keeps a regular hexagon.
 fn lattice_of(sampling: Sampling, area: f64, elongation: f64) -> Result<(usize, usize)> {
     let points = match sampling {
         Sampling::Atoms(n) if n > 0 => n as f64 / 4.0,
@@ -346,9 +421,31 @@ fn lattice_of(sampling: Sampling, area: f64, elongation: f64) -> Result<(usize, 
         _ => return Err(non_positive(sampling)),
     };
     let ratio = Lattice::stretch_ratio(elongation);
-    let rings = ((points / (3.0 + 2.0 * ratio)).sqrt().round() as usize).clamp(2, 64);
-    let stretch = ((ratio * rings as f64).round() as usize).min(16 * rings);
-    Ok((rings, stretch))
+    let rings = (points / (3.0 + 2.0 * ratio)).sqrt();
+    let candidates = [rings.floor() as usize, rings.ceil() as usize]
+        .map(|r| r.clamp(2, 64))
+        .into_iter()
+        .flat_map(|r| {
+            let aimed = ratio * r as f64;
+            let slack = if ratio > 0.0 {
+                (STRETCH_SLACK * aimed).max(1.0)
+            } else {
+                0.0
+            };
+            let (lo, hi) = ((aimed - slack).ceil().max(0.0), (aimed + slack).floor());
+            (lo as usize..=(hi as usize).max(lo as usize)).map(move |s| (r, s.min(16 * r)))
+        });
+    let off = |&(r, s): &(usize, usize)| {
+        let lattice = (2 * r + 1) * (s + 1) + r * (3 * r + 1);
+        let (count, aim) = match sampling {
+            Sampling::Atoms(n) => ((4 * lattice - 6 * r - 2 * s - 3) as f64, n as f64),
+            _ => (lattice as f64, points),
+        };
+        (count / aim).ln().abs()
+    };
+    Ok(candidates
+        .min_by(|a, b| off(a).total_cmp(&off(b)))
+        .expect("two candidate ring counts"))
 }
 
 /// The distance between atoms (mm) for `sampling` over sheets of total area `area` (mm²):
