@@ -42,9 +42,12 @@
 //! (h/8 + 0.4 σ_img) × area / volume (`h` the voxel size).
 //!
 //! **Parallelism.** Triangles are cut into fixed chunks whose sums are added in chunk order
-//! (`sums`): the result is the same, bit for bit, whatever the number of threads.
+//! (`sums`): the result is the same, bit for bit, whatever the number of threads. Within a
+//! triangle the prisms of up to eight layers are computed together in vector lanes (`lanes`),
+//! the same bits on every instruction set.
 
 mod check;
+mod lanes;
 mod prism;
 mod sampling;
 mod sums;

@@ -12,36 +12,42 @@
 //! to rounding. A prism turned inside out has a negative volume; it is reported
 //! ([`DiceValue::negative_volume`]), never clipped.
 
-use crate::Vec3;
+use super::lanes::{Lanes, Points, LANES};
 
-/// Signed volume of a prism with corners `x` and its gradient with respect to each corner,
-/// from the closed triangulated surface whose faces not touching corner 0 are `faces` (see
-/// [`prism_faces`]). Coordinates are taken relative to corner 0: the volume of a closed surface
-/// does not depend on the origin, the faces through the origin contribute nothing (nor to the
-/// gradient at the other corners), and the gradient at corner 0 is minus the sum of the others.
-// Inlined into the per-triangle loop: called out of line it costs +9 % of the Dice
-// instructions (the gradient array returned through memory; seen after an unrelated change).
+/// Signed volumes of the prisms of up to [`LANES`] layers with corners `x` (one per lane) and
+/// their gradients with respect to each corner, from the closed triangulated surface whose
+/// faces not touching corner 0 are `faces` (see [`prism_faces`]), the same for every layer.
+/// Coordinates are taken relative to corner 0: the volume of a closed surface does not depend
+/// on the origin, the faces through the origin contribute nothing (nor to the gradient at the
+/// other corners), and the gradient at corner 0 is minus the sum of the others:
+/// `vol = (1/6) Σ_faces y_a · (y_b × y_c)`, `∂vol/∂y_a = (1/6) y_b × y_c` (and cyclically).
+// Inlined into the per-triangle loop (compiled there for the dispatched instruction set).
 #[inline(always)]
-pub(super) fn prism_volume(x: &[Vec3; 6], faces: &[[usize; 3]]) -> (f64, [Vec3; 6]) {
-    // Plain loops: `array::map` over `Vec3` compiles to copies here.
-    let mut y = [Vec3::zeros(); 6];
+pub(super) fn prism_volumes(x: &[Points; 6], faces: &[[usize; 3]]) -> (Lanes, [Points; 6]) {
+    let mut y = [Points::default(); 6];
     for n in 1..6 {
-        y[n] = x[n] - x[0];
+        y[n] = x[n].sub(&x[0]);
     }
-    let mut vol = 0.0;
-    let mut grad = [Vec3::zeros(); 6];
+    let mut vol = [0.0; LANES];
+    let mut grad = [Points::default(); 6];
     for &[a, b, c] in faces {
         let bc = y[b].cross(&y[c]);
-        vol += y[a].dot(&bc);
-        grad[a] += bc;
-        grad[b] += y[c].cross(&y[a]);
-        grad[c] += y[a].cross(&y[b]);
+        let term = y[a].dot(&bc);
+        for l in 0..LANES {
+            vol[l] += term[l];
+        }
+        grad[a].add_assign(&bc);
+        grad[b].add_assign(&y[c].cross(&y[a]));
+        grad[c].add_assign(&y[a].cross(&y[b]));
     }
     for n in 1..6 {
-        grad[n] /= 6.0;
-        grad[0] -= grad[n];
+        grad[n] = grad[n].div(6.0);
+        grad[0] = grad[0].sub(&grad[n]);
     }
-    (vol / 6.0, grad)
+    for v in &mut vol {
+        *v /= 6.0;
+    }
+    (vol, grad)
 }
 
 /// The outward faces of the prism over triangle `tri` (corner indices, see
@@ -91,6 +97,7 @@ fn side_faces(tri: &[usize; 3], a: usize) -> [[usize; 3]; 2] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Vec3;
     use std::collections::HashMap;
 
     /// The five faces not touching corner 0, plus the three that do, close the prism.
@@ -118,8 +125,9 @@ mod tests {
     #[test]
     fn prism_volume_and_gradient() {
         // A right prism over the unit right triangle, height 2 (outward bottom cap faces −z,
-        // so the bottom triangle is listed clockwise seen from +z), volume 1.
-        let x = [
+        // so the bottom triangle is listed clockwise seen from +z), volume 1; in the other
+        // lanes the same prism sheared by `l/10` along x and moved by `l` along y.
+        let base = [
             Vec3::new(0.0, 0.0, 0.0),
             Vec3::new(0.0, 1.0, 0.0),
             Vec3::new(1.0, 0.0, 0.0),
@@ -127,18 +135,36 @@ mod tests {
             Vec3::new(0.0, 1.0, 2.0),
             Vec3::new(1.0, 0.0, 2.0),
         ];
+        let lanes = |x: &[Vec3; 6]| -> [Points; 6] {
+            std::array::from_fn(|c| {
+                Points::of(std::array::from_fn(|l| {
+                    x[c] + Vec3::new(0.1 * l as f64 * base[c].z, l as f64, 0.0)
+                }))
+            })
+        };
         let faces = prism_faces(&[0, 1, 2]);
         let faces = faces.as_slice();
-        let (vol, grad) = prism_volume(&x, faces);
-        assert!((vol - 1.0).abs() < 1e-15);
+        let (vol, grad) = prism_volumes(&lanes(&base), faces);
+        for (l, v) in vol.iter().enumerate() {
+            assert!((v - 1.0).abs() < 1e-14, "lane {l}: {v}");
+        }
         let h = 1e-6;
         for c in 0..6 {
             for a in 0..3 {
-                let (mut xp, mut xm) = (x, x);
+                let (mut xp, mut xm) = (base, base);
                 xp[c][a] += h;
                 xm[c][a] -= h;
-                let fd = (prism_volume(&xp, faces).0 - prism_volume(&xm, faces).0) / (2.0 * h);
-                assert!((fd - grad[c][a]).abs() < 1e-8, "corner {c} axis {a}");
+                let (vp, vm) = (
+                    prism_volumes(&lanes(&xp), faces).0,
+                    prism_volumes(&lanes(&xm), faces).0,
+                );
+                for l in 0..LANES {
+                    let fd = (vp[l] - vm[l]) / (2.0 * h);
+                    assert!(
+                        (fd - grad[c].lane(l)[a]).abs() < 1e-8,
+                        "corner {c} axis {a} lane {l}"
+                    );
+                }
             }
         }
     }

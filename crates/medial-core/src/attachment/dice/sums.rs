@@ -2,7 +2,8 @@
 //! accumulators, which are then added in chunk order: the result is the same, bit for bit,
 //! whatever the number of threads.
 
-use super::prism::prism_volume;
+use super::lanes::{Isa, Lanes, Points, LANES};
+use super::prism::prism_volumes;
 use super::{DiceAttachment, Ends, Sample};
 use crate::Vec3;
 
@@ -17,7 +18,60 @@ pub(super) struct ChunkSums {
 }
 
 impl DiceAttachment {
+    /// The sums over the prisms of the triangles `tris`, on the widest instruction set the CPU
+    /// has ([`Isa`]: the same bits on each).
     pub(super) fn chunk_sums(
+        &self,
+        tris: &[usize],
+        ends: &[Ends],
+        samples: &[Sample],
+        want_grad: bool,
+    ) -> ChunkSums {
+        match Isa::best() {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: the running CPU supports AVX-512F (`Isa::best` checked it).
+            Isa::Avx512 => unsafe { self.chunk_sums_avx512(tris, ends, samples, want_grad) },
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: the running CPU supports AVX2 and FMA (`Isa::best` checked it).
+            Isa::Avx2 => unsafe { self.chunk_sums_avx2(tris, ends, samples, want_grad) },
+            _ => self.chunk_sums_with(tris, ends, samples, want_grad),
+        }
+    }
+
+    /// [`Self::chunk_sums_with`] compiled for AVX-512F.
+    ///
+    /// # Safety
+    /// The CPU must support AVX-512F.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx2,fma")]
+    unsafe fn chunk_sums_avx512(
+        &self,
+        tris: &[usize],
+        ends: &[Ends],
+        samples: &[Sample],
+        want_grad: bool,
+    ) -> ChunkSums {
+        self.chunk_sums_with(tris, ends, samples, want_grad)
+    }
+
+    /// [`Self::chunk_sums_with`] compiled for AVX2.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn chunk_sums_avx2(
+        &self,
+        tris: &[usize],
+        ends: &[Ends],
+        samples: &[Sample],
+        want_grad: bool,
+    ) -> ChunkSums {
+        self.chunk_sums_with(tris, ends, samples, want_grad)
+    }
+
+    #[inline(always)]
+    fn chunk_sums_with(
         &self,
         tris: &[usize],
         ends: &[Ends],
@@ -31,7 +85,9 @@ impl DiceAttachment {
         sums
     }
 
-    /// Adds the prisms over subdivided triangle `t` (all layers) to `sums`.
+    /// Adds the prisms over subdivided triangle `t` (all layers) to `sums`: their volumes and
+    /// gradients [`LANES`] layers at a time, then each layer's terms in layer order.
+    #[inline(always)]
     fn triangle_sums(
         &self,
         t: usize,
@@ -42,31 +98,53 @@ impl DiceAttachment {
     ) {
         let nv = self.stencils.len();
         let tri = self.triangles[t];
-        let ends = tri.map(|v| &ends[v]);
+        // (Arrays written out: `array::map` and `from_fn` here are compiled out of line.)
+        let corner_ends = [&ends[tri[0]], &ends[tri[1]], &ends[tri[2]]];
         let mut vertex = VertexGradients::default();
-        for i in 0..self.layers {
-            let (s_lower, s_upper) = (self.sheet(i), self.sheet(i + 1));
-            let x = std::array::from_fn(|n| {
-                if n < 3 {
-                    ends[n].at(s_lower)
-                } else {
-                    ends[n - 3].at(s_upper)
-                }
-            });
-            let (vol, dvol) = prism_volume(&x, self.faces[t].as_slice());
-            let mid = tri.map(|v| &samples[i * nv + v]);
-            let mean_f = mid.iter().map(|s| s.f).sum::<f64>() / 3.0;
-            sums.volume += vol;
-            sums.overlap += vol * mean_f;
-            sums.negative += vol.min(0.0);
-            if want_grad {
-                // ∂|vol| = sign(vol) ∂vol: a folded prism adds to the denominator.
-                let sign = if vol < 0.0 { -1.0 } else { 1.0 };
-                for j in 0..3 {
-                    vertex.add(j, s_lower, mean_f * dvol[j], sign * dvol[j]);
-                    vertex.add(j, s_upper, mean_f * dvol[j + 3], sign * dvol[j + 3]);
-                    let s_mid = s_lower + self.half_layer();
-                    vertex.add_overlap(j, s_mid, vol / 3.0 * mid[j].grad_f);
+        for first in (0..self.layers).step_by(LANES) {
+            // Lanes past the last layer repeat it; their results are not used.
+            let (mut s_lower, mut s_upper): (Lanes, Lanes) = ([0.0; LANES], [0.0; LANES]);
+            for l in 0..LANES {
+                let layer = (first + l).min(self.layers - 1);
+                s_lower[l] = self.sheet(layer);
+                s_upper[l] = self.sheet(layer + 1);
+            }
+            let [a, b, c] = corner_ends;
+            let x = [
+                Points::along(a, &s_lower),
+                Points::along(b, &s_lower),
+                Points::along(c, &s_lower),
+                Points::along(a, &s_upper),
+                Points::along(b, &s_upper),
+                Points::along(c, &s_upper),
+            ];
+            let (vols, dvols) = prism_volumes(&x, self.faces[t].as_slice());
+            for l in 0..LANES.min(self.layers - first) {
+                let i = first + l;
+                let (s_lower, s_upper, vol) = (s_lower[l], s_upper[l], vols[l]);
+                let row = &samples[i * nv..(i + 1) * nv];
+                let mid = [&row[tri[0]], &row[tri[1]], &row[tri[2]]];
+                let mean_f = mid.iter().map(|s| s.f).sum::<f64>() / 3.0;
+                sums.volume += vol;
+                sums.overlap += vol * mean_f;
+                sums.negative += vol.min(0.0);
+                if want_grad {
+                    let dvol = [
+                        dvols[0].lane(l),
+                        dvols[1].lane(l),
+                        dvols[2].lane(l),
+                        dvols[3].lane(l),
+                        dvols[4].lane(l),
+                        dvols[5].lane(l),
+                    ];
+                    // ∂|vol| = sign(vol) ∂vol: a folded prism adds to the denominator.
+                    let sign = if vol < 0.0 { -1.0 } else { 1.0 };
+                    for j in 0..3 {
+                        vertex.add(j, s_lower, mean_f * dvol[j], sign * dvol[j]);
+                        vertex.add(j, s_upper, mean_f * dvol[j + 3], sign * dvol[j + 3]);
+                        let s_mid = s_lower + self.half_layer();
+                        vertex.add_overlap(j, s_mid, vol / 3.0 * mid[j].grad_f);
+                    }
                 }
             }
         }
