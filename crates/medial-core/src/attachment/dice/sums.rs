@@ -224,3 +224,85 @@ impl ChunkSums {
         self
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::{DiceAttachment, DiceParams, Ends};
+    use super::*;
+    use crate::image::rasterize::{grid_around, rasterize};
+    use crate::synth::{boundary_mesh, Shape, SyntheticCase};
+
+    /// The sums over every triangle of the cup, moved a little off its own rasterization, on
+    /// each instruction set the CPU has: the same bits (`layers` 5 and 11: one lane block with
+    /// three idle lanes, and two blocks).
+    #[test]
+    fn every_instruction_set_gives_the_same_bits() {
+        let template = SyntheticCase::build(Shape::Cup)
+            .unwrap()
+            .projection
+            .template;
+        let boundary = boundary_mesh(&template).unwrap();
+        let (dims, grid) = grid_around(&boundary, 0.5, 2.0).unwrap();
+        let image = rasterize(&boundary, dims, grid)
+            .unwrap()
+            .smoothed(0.3)
+            .unwrap();
+        let nb = template.boundary_count();
+        let medial_of: Vec<usize> = (template.medial_index().iter()).map(|&m| nb + m).collect();
+        let q: Vec<Vec3> = (template.landmarks().iter())
+            .map(|p| p + Vec3::new(0.3 * (0.2 * p.y).sin(), 0.1, -0.2))
+            .collect();
+        for layers in [5, 11] {
+            let params = DiceParams {
+                subdivision: 1,
+                layers,
+            };
+            let dice = DiceAttachment::new(
+                template.boundary_triangles(),
+                &medial_of,
+                q.len(),
+                image.clone(),
+                params,
+            )
+            .unwrap();
+            let ends: Vec<Ends> = (dice.stencils.iter())
+                .map(|s| Ends {
+                    boundary: s.boundary.apply(&q),
+                    medial: s.medial.apply(&q),
+                })
+                .collect();
+            let samples = dice.samples(&ends, true);
+            let tris: Vec<usize> = (0..dice.triangles.len()).collect();
+            let bits = |s: &ChunkSums| {
+                let mut b = vec![
+                    s.volume.to_bits(),
+                    s.overlap.to_bits(),
+                    s.negative.to_bits(),
+                ];
+                for g in s.grad_overlap.iter().chain(&s.grad_volume) {
+                    b.extend(g.iter().map(|x| x.to_bits()));
+                }
+                b
+            };
+            let baseline = bits(&dice.chunk_sums_with(&tris, &ends, &samples, true));
+            assert_eq!(
+                bits(&dice.chunk_sums(&tris, &ends, &samples, true)),
+                baseline
+            );
+            #[cfg(target_arch = "x86_64")]
+            {
+                use std::arch::is_x86_feature_detected as has;
+                if has!("avx2") && has!("fma") {
+                    // SAFETY: checked just above.
+                    let avx2 = unsafe { dice.chunk_sums_avx2(&tris, &ends, &samples, true) };
+                    assert_eq!(bits(&avx2), baseline, "AVX2, {layers} layers");
+                }
+                if has!("avx512f") {
+                    // SAFETY: checked just above.
+                    let avx512 = unsafe { dice.chunk_sums_avx512(&tris, &ends, &samples, true) };
+                    assert_eq!(bits(&avx512), baseline, "AVX-512, {layers} layers");
+                }
+            }
+        }
+    }
+}
