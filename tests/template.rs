@@ -229,16 +229,6 @@ fn the_toy_seam_is_recovered_within_a_voxel_its_sheets_within_half_a_voxel_on_av
     assert!(max_r <= VOXEL, "sheets' radius off by {max_r} mm");
 }
 
-/// The atoms after one Loop subdivision of `sheet`: a point per vertex and per edge.
-fn atoms_after_subdivision(found: &ShapeSheet) -> usize {
-    let mut edges: Vec<(usize, usize)> = (found.sheet.triangles().iter())
-        .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
-        .collect();
-    edges.sort_unstable();
-    edges.dedup();
-    found.sheet.points().len() + edges.len()
-}
-
 #[test]
 fn a_branching_shape_gets_about_the_atoms_asked_for() {
     let case = SyntheticCase::build(Shape::Toy).unwrap();
@@ -251,7 +241,7 @@ fn a_branching_shape_gets_about_the_atoms_asked_for() {
     // alone gave 1.26 and 0.97 times as many).
     for asked in [300, 1000] {
         let found = sheet_of_mask(&mask, Sampling::Atoms(asked)).unwrap();
-        let ratio = atoms_after_subdivision(&found) as f64 / asked as f64;
+        let ratio = found.sheet.subdivided_point_count() as f64 / asked as f64;
         eprintln!("toy, {asked} atoms asked: {ratio:.2} times as many");
         assert!(
             (0.8..=1.25).contains(&ratio),

@@ -281,14 +281,9 @@ impl Stitched {
         })
     }
 
-    /// The atoms after one Loop subdivision: a point per vertex and per edge.
+    /// The atoms after one Loop subdivision.
     fn atoms(&self) -> usize {
-        let mut edges: Vec<(usize, usize)> = (self.sheet.triangles().iter())
-            .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
-            .collect();
-        edges.sort_unstable();
-        edges.dedup();
-        self.sheet.points().len() + edges.len()
+        self.sheet.subdivided_point_count()
     }
 }
 
