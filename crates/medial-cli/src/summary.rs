@@ -157,6 +157,10 @@ pub struct Summary {
     /// holds them per time point).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub over_time: Option<OverTime>,
+    /// The strain of each step of the fitted flow, `dt · max_i ‖∇v^n(q^n_i)‖_F`, `n = 0 … N−1`
+    /// (`medial_core::flow::Flow::step_strains`): a step is one-to-one while its strain is
+    /// below 1, and a fit warns past `STRAIN_LIMIT` (0.5).
+    pub step_strains: Vec<f64>,
     /// Each stage.
     pub stages: Vec<StageSummary>,
     /// The other files of this set of results (paths relative to the folder, sorted): all in

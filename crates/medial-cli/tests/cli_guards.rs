@@ -143,6 +143,14 @@ fn constraints_above_tolerance_exit_4_and_the_multipliers_reproduce_a_fit() {
     let summary = read_summary(&out);
     assert_eq!(summary["stages"][1]["constraints_met"], true);
     assert!(["converged", "budget"].contains(&summary["status"].as_str().unwrap()));
+    // Its 20 steps strain space little (dt·|∇v| about 0.05), and nothing warns of it.
+    let strains = summary["step_strains"].as_array().unwrap();
+    assert_eq!(strains.len(), 20);
+    assert!(
+        strains.iter().all(|s| f(s) > 0.0 && f(s) < 0.2),
+        "{strains:?}"
+    );
+    assert!(!text(&o.stderr).contains("strains space"));
     let mu = summary["stages"][1]["mu"].to_string();
     let figures = run_json(&[
         "eval",
@@ -163,4 +171,25 @@ fn constraints_above_tolerance_exit_4_and_the_multipliers_reproduce_a_fit() {
             "{key}: eval {a} vs fit {b}"
         );
     }
+}
+
+#[test]
+fn a_flow_of_too_few_steps_for_its_strain_is_warned_of() {
+    let dir = tempfile::tempdir().unwrap();
+    // The toy's deformation in one step: dt·|∇v| about twenty times the shipped 20 steps'.
+    let coarse = example_config(dir.path(), "toy", |t| {
+        t.replace("time_steps = 20", "time_steps = 1")
+            .replace("al_iterations = 6", "al_iterations = 1")
+    });
+    let out = dir.path().join("coarse");
+    let o = medial(&["fit", s(&coarse), "--out", s(&out), "-q"]);
+    let err = text(&o.stderr);
+    let summary = read_summary(&out);
+    let strains = summary["step_strains"].as_array().unwrap();
+    assert_eq!(strains.len(), 1);
+    assert!(f(&strains[0]) >= 0.5, "{strains:?}");
+    assert!(
+        err.contains("step 0 of the fitted flow strains space") && err.contains("time_steps"),
+        "{err}"
+    );
 }

@@ -700,6 +700,8 @@ impl Fit<'_> {
         let momenta = &outcomes.last().expect("a config has a stage").momenta;
         let trajectory = self.flow.shoot(self.model.landmarks(), momenta)?;
         let points = time_points(self.model, &trajectory);
+        let strains = self.flow.step_strains(&trajectory, momenta)?;
+        warn_of_strain(&strains);
         write_results(
             self.config,
             &mut set,
@@ -739,7 +741,7 @@ impl Fit<'_> {
                 )
             }
         };
-        let mut summary = self.summary(status, seconds, stages, &points);
+        let mut summary = self.summary(status, seconds, stages, &points, strains);
         log.finish(&mut set)?;
         // The views are made from the set's own files (as `medial report` makes them from a
         // fit folder's), in the staging folder with a draft of the summary, and belong to the set.
@@ -789,6 +791,7 @@ impl Fit<'_> {
         seconds: f64,
         stages: Vec<StageSummary>,
         points: &[time_points::TimePoint],
+        step_strains: Vec<f64>,
     ) -> Summary {
         let model = self.model;
         Summary {
@@ -807,10 +810,31 @@ impl Fit<'_> {
             evaluations: stages.iter().map(|s| s.evaluations).sum(),
             final_figures: stages.last().expect("a config has a stage").figures.clone(),
             over_time: time_points::over_time(points),
+            step_strains,
             stages,
             files: Vec::new(),
         }
     }
+}
+
+/// The step strain (`dt·|∇v|`, see [`Flow::step_strains`]) from which a fit warns: a step is
+/// one-to-one while it is below 1 (a sufficient condition, checked at the landmarks); half
+/// of that leaves a margin for the field between them.
+pub const STRAIN_LIMIT: f64 = 0.5;
+
+/// A warning when a step of the fitted flow strains space past [`STRAIN_LIMIT`].
+fn warn_of_strain(strains: &[f64]) {
+    let Some((n, &worst)) = (strains.iter().enumerate())
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .filter(|(_, s)| s.is_nan() || **s >= STRAIN_LIMIT)
+    else {
+        return;
+    };
+    tracing::warn!(
+        "step {n} of the fitted flow strains space by dt·|∇v| = {worst:.2} (above \
+         {STRAIN_LIMIT}; 1 or more can fold space between the landmarks): raise [flow] \
+         time_steps"
+    );
 }
 
 /// How a fit whose last stage run is `last` ended (not interrupted).

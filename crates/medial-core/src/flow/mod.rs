@@ -178,6 +178,36 @@ impl Flow {
         rayon::scope(|_| self.forward_steps(q0, u))
     }
 
+    /// The strain of each step of `trajectory` (the forward pass of `u`):
+    /// `dt · max_i ‖∇v^n(q^n_i)‖_F`, `n = 0 … N−1`, with `∇v^n(x) = −(1/σ²) Σ_j K(x, q^n_j)
+    /// (x − q^n_j) u^nᵀ_j` the gradient of the step's velocity field at each landmark
+    /// (Frobenius norm, at least the spectral one). A step `x ↦ x + dt v^n(x)` is one-to-one
+    /// while `dt · sup_x ‖∇v^n(x)‖ < 1` (a contraction argument: two points that met would
+    /// have moved apart by more than they were apart); the landmarks, where the momenta are,
+    /// are where the field varies most. One fused sweep per step, as in the forward pass
+    /// (truncated with the flow's kernel tolerance), the same bits for any thread count.
+    pub fn step_strains(&self, trajectory: &Trajectory, u: &[f64]) -> Result<Vec<f64>> {
+        self.check_sizes(trajectory.positions(0), u)?;
+        let scale = self.dt() / (self.kernel.sigma() * self.kernel.sigma());
+        rayon::scope(|_| {
+            let mut sweep = PairSweep::new(&self.kernel, self.landmarks);
+            (0..self.steps)
+                .map(|n| {
+                    let (q, un) = (trajectory.positions(n), self.step_controls(u, n));
+                    for (i, (qi, ui)) in q.iter().zip(un.chunks_exact(3)).enumerate() {
+                        sweep.set_point(i, [qi.x, qi.y, qi.z, ui[0], ui[1], ui[2]]);
+                    }
+                    sweep.run(&StrainTerms);
+                    // The largest, NaN if any is (`f64::max` would drop it).
+                    let largest = (0..self.landmarks)
+                        .map(|i| sweep.sums(i).iter().map(|s| s * s).sum::<f64>().sqrt())
+                        .fold(0.0, |m, x| if x.is_nan() || x > m { x } else { m });
+                    Ok(scale * largest)
+                })
+                .collect()
+        })
+    }
+
     /// The steps of [`Flow::shoot`].
     fn forward_steps(&self, q0: &[Vec3], u: &[f64]) -> Result<Trajectory> {
         let dt = self.dt();
@@ -344,6 +374,34 @@ impl PairTerms<6, 3> for VelocityTerms {
         for c in 0..3 {
             row_sums[c] = kernel.mul_add(field(chunk, 3 + c), row_sums[c]);
             kernel.mul_add_to(ui[c], &mut col_sums[LANES * c..]);
+        }
+    }
+}
+
+/// The velocity-gradient terms `K_ij (q_i − q_j)_a u_{j,b}` (sum `3a + b`; `∇v(q_i)_{ab} =
+/// −S_{3a+b}(i)/σ²`); a point carries `(q, u)`.
+struct StrainTerms;
+
+impl PairTerms<6, 9> for StrainTerms {
+    #[inline(always)]
+    fn accumulate<V: F64Lanes>(
+        &self,
+        row: &[f64; 6],
+        chunk: &[f64],
+        kernel: V,
+        d: &[V; 3],
+        row_sums: &mut [V; 9],
+        col_sums: &mut [f64],
+    ) {
+        let ui: [V; 3] = splat3(row, 3);
+        for (a, &da) in d.iter().enumerate() {
+            // K_ij (q_i − q_j)_a; for the pair seen from j, (q_j − q_i)_a = −d_a.
+            let kd = kernel * da;
+            for (b, &uib) in ui.iter().enumerate() {
+                let c = 3 * a + b;
+                row_sums[c] = kd.mul_add(field(chunk, 3 + b), row_sums[c]);
+                kd.neg_mul_add_to(uib, &mut col_sums[LANES * c..]);
+            }
         }
     }
 }
