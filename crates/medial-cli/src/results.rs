@@ -130,28 +130,40 @@ impl Drop for ResultSet {
 
 /// Removes from `dir` and its set sub-folders what interrupted runs leave: staging folders
 /// (`.medial-staging-*`), the temporary files of atomic writes (`.*.tmp`) and unfinished files
-/// (`*.part`).
+/// (`*.part`). Refuses (`Busy`), before removing anything, when another running process owns a
+/// staging folder there: its unfinished files (its `log.csv.part`) are its own, and a folder
+/// lists them in no set order (removing as they came once deleted a running fit's log before
+/// its staging folder was reached).
 pub fn clean(dir: &Path) -> Result<(), CliError> {
     let folders = std::iter::once(dir.to_path_buf()).chain(SUBFOLDERS.iter().map(|s| dir.join(s)));
-    for folder in folders {
-        let Ok(entries) = std::fs::read_dir(&folder) else {
-            continue;
-        };
-        for entry in entries.flatten() {
-            let name = entry.file_name().to_string_lossy().into_owned();
-            let path = entry.path();
+    let entries: Vec<(String, PathBuf, bool)> = folders
+        .filter_map(|folder| std::fs::read_dir(folder).ok())
+        .flat_map(|entries| entries.flatten())
+        .map(|entry| {
             let is_dir = entry.file_type().is_ok_and(|t| t.is_dir());
-            if is_dir && name.starts_with(STAGING_PREFIX) {
-                if let Some(pid) = writer_running(&name[STAGING_PREFIX.len()..]) {
-                    return Err(CliError::Busy {
-                        dir: dir.into(),
-                        pid,
-                    });
-                }
-                std::fs::remove_dir_all(&path).map_err(|e| CliError::io(&path, e))?;
-            } else if !is_dir && is_leftover(&name) {
-                remove_if_present(&path)?;
+            (
+                entry.file_name().to_string_lossy().into_owned(),
+                entry.path(),
+                is_dir,
+            )
+        })
+        .collect();
+    let staging = |name: &str, is_dir: bool| is_dir && name.starts_with(STAGING_PREFIX);
+    for (name, _, is_dir) in &entries {
+        if staging(name, *is_dir) {
+            if let Some(pid) = writer_running(&name[STAGING_PREFIX.len()..]) {
+                return Err(CliError::Busy {
+                    dir: dir.into(),
+                    pid,
+                });
             }
+        }
+    }
+    for (name, path, is_dir) in &entries {
+        if staging(name, *is_dir) {
+            std::fs::remove_dir_all(path).map_err(|e| CliError::io(path, e))?;
+        } else if !is_dir && is_leftover(name) {
+            remove_if_present(path)?;
         }
     }
     Ok(())
