@@ -365,12 +365,20 @@ impl Volume {
         let base = v.map(f64::floor);
         let t = v - base;
         let c = self.cell([base.x as i64, base.y as i64, base.z as i64]);
-        // Interpolate along x, then y, then z; differentiate each stage.
-        let x = [0, 2, 4, 6].map(|n| c[n] + t.x * (c[n + 1] - c[n]));
-        let dx = [0, 2, 4, 6].map(|n| c[n + 1] - c[n]);
-        let y = [0, 2].map(|n| x[n] + t.y * (x[n + 1] - x[n]));
-        let dxy = [0, 2].map(|n| dx[n] + t.y * (dx[n + 1] - dx[n]));
-        let dy = [0, 2].map(|n| x[n + 1] - x[n]);
+        // Interpolate along x, then y, then z; differentiate each stage. (Written out: the
+        // `array::map` of these small arrays was once compiled out of line, +5 % of the Dice
+        // attachment's instructions.)
+        let lerp = |a: f64, b: f64, s: f64| a + s * (b - a);
+        let x = [
+            lerp(c[0], c[1], t.x),
+            lerp(c[2], c[3], t.x),
+            lerp(c[4], c[5], t.x),
+            lerp(c[6], c[7], t.x),
+        ];
+        let dx = [c[1] - c[0], c[3] - c[2], c[5] - c[4], c[7] - c[6]];
+        let y = [lerp(x[0], x[1], t.y), lerp(x[2], x[3], t.y)];
+        let dxy = [lerp(dx[0], dx[1], t.y), lerp(dx[2], dx[3], t.y)];
+        let dy = [x[1] - x[0], x[3] - x[2]];
         let value = y[0] + t.z * (y[1] - y[0]);
         let grad = Vec3::new(
             dxy[0] + t.z * (dxy[1] - dxy[0]),
