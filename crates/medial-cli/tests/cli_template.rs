@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::{f, medial, one_line_error, run_json, s, text};
+use common::{data, f, medial, one_line_error, run_json, s, text};
 use medial_core::build::MedialSheet;
 use medial_core::image::volume::Volume;
 use medial_core::mesh::distance::SurfaceDistance;
@@ -226,7 +226,7 @@ fn mean(values: &[f64]) -> f64 {
 
 #[test]
 fn the_leaflet_sheet_lies_on_cmreps_fitted_sheet_and_on_its_voronoi_skeleton() {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/cmrep/leaflets");
+    let data = data("cmrep/leaflets");
     let dir = tempfile::tempdir().unwrap();
     let (out, sheet) = (dir.path().join("leaflet.vtk"), dir.path().join("sheet.vtk"));
     let shape = data.join("target_anterior.nii.gz");

@@ -189,23 +189,24 @@ impl Flow {
     pub fn step_strains(&self, trajectory: &Trajectory, u: &[f64]) -> Result<Vec<f64>> {
         self.check_sizes(trajectory.positions(0), u)?;
         let scale = self.dt() / (self.kernel.sigma() * self.kernel.sigma());
-        rayon::scope(|_| {
+        Ok(rayon::scope(|_| {
             let mut sweep = PairSweep::new(&self.kernel, self.landmarks);
             (0..self.steps)
                 .map(|n| {
-                    let (q, un) = (trajectory.positions(n), self.step_controls(u, n));
-                    for (i, (qi, ui)) in q.iter().zip(un.chunks_exact(3)).enumerate() {
-                        sweep.set_point(i, [qi.x, qi.y, qi.z, ui[0], ui[1], ui[2]]);
-                    }
+                    load(
+                        &mut sweep,
+                        trajectory.positions(n),
+                        self.step_controls(u, n),
+                    );
                     sweep.run(&StrainTerms);
                     // The largest, NaN if any is (`f64::max` would drop it).
                     let largest = (0..self.landmarks)
                         .map(|i| sweep.sums(i).iter().map(|s| s * s).sum::<f64>().sqrt())
                         .fold(0.0, |m, x| if x.is_nan() || x > m { x } else { m });
-                    Ok(scale * largest)
+                    scale * largest
                 })
                 .collect()
-        })
+        }))
     }
 
     /// The steps of [`Flow::shoot`].
@@ -217,9 +218,7 @@ impl Flow {
         let mut kinetic = 0.0;
         for n in 0..self.steps {
             let (q, un) = (&positions[n], self.step_controls(u, n));
-            for (i, (qi, ui)) in q.iter().zip(un.chunks_exact(3)).enumerate() {
-                sweep.set_point(i, [qi.x, qi.y, qi.z, ui[0], ui[1], ui[2]]);
-            }
+            load(&mut sweep, q, un);
             sweep.run(&VelocityTerms);
             let mut step_ke = 0.0;
             let next = (q.iter().zip(un.chunks_exact(3)).enumerate())
@@ -348,6 +347,13 @@ impl Flow {
 #[inline(always)]
 fn field<V: F64Lanes>(chunk: &[f64], f: usize) -> V {
     V::load(&chunk[LANES * f..])
+}
+
+/// Each landmark `i` into `sweep` as `(q_i, u_i)`, `u` the step's momenta (`k·3` numbers).
+fn load<const C: usize>(sweep: &mut PairSweep<6, C>, q: &[Vec3], u: &[f64]) {
+    for (i, (qi, ui)) in q.iter().zip(u.chunks_exact(3)).enumerate() {
+        sweep.set_point(i, [qi.x, qi.y, qi.z, ui[0], ui[1], ui[2]]);
+    }
 }
 
 /// Fields `f … f + 2` (a vector) of point `row`, in every lane.

@@ -1,10 +1,11 @@
 //! The layers of prisms over one subdivided triangle, eight at a time: points and numbers as
 //! arrays of [`LANES`] values, one per layer, in plain per-lane loops that the compiler turns
 //! into vector instructions (one AVX-512 register, two AVX2 ones or four SSE2 ones, whichever
-//! the CPU has: [`Isa`] dispatches at run time). Each lane does the operations of the scalar
-//! formulas in the same order, and Rust never fuses a multiply and an add on its own, so the
-//! results are the same bits on every instruction set. No crate offers this (a fixed-width
-//! structure-of-arrays over 3-vectors with run-time dispatch) on stable Rust.
+//! the CPU has: the kernel's [`Isa`](crate::flow::kernel::Isa) picks at run time). Each lane
+//! does the operations of the scalar formulas in the same order, and Rust never fuses a
+//! multiply and an add on its own, so the results are the same bits on every instruction set
+//! (unlike the kernel's lanes, whose intrinsics fuse them). Plain arrays rather than a SIMD
+//! crate: the compiler vectorizes these loops, and the dispatch is the kernel's.
 
 use super::sampling::Ends;
 use crate::Vec3;
@@ -120,35 +121,5 @@ impl Points {
             *d = self.x[l] * o.x[l] + self.y[l] * o.y[l] + self.z[l] * o.z[l];
         }
         out
-    }
-}
-
-/// The instruction sets the prism arithmetic is compiled for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Isa {
-    /// The target's baseline (SSE2 on x86-64).
-    Baseline,
-    /// AVX2 with FMA (no fused operations are emitted: the bits are the baseline's).
-    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-    Avx2,
-    /// AVX-512F.
-    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
-    Avx512,
-}
-
-impl Isa {
-    /// The widest the running CPU supports (the detection is cached by the standard library).
-    pub(super) fn best() -> Self {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::is_x86_feature_detected as has;
-            if has!("avx512f") {
-                return Isa::Avx512;
-            }
-            if has!("avx2") && has!("fma") {
-                return Isa::Avx2;
-            }
-        }
-        Isa::Baseline
     }
 }

@@ -2,9 +2,10 @@
 //! accumulators, which are then added in chunk order: the result is the same, bit for bit,
 //! whatever the number of threads.
 
-use super::lanes::{Isa, Lanes, Points, LANES};
+use super::lanes::{Lanes, Points, LANES};
 use super::prism::prism_volumes;
 use super::{DiceAttachment, Ends, Sample};
+use crate::flow::kernel::Isa;
 use crate::Vec3;
 
 /// Partial sums of one chunk of triangles.
@@ -33,7 +34,9 @@ impl DiceAttachment {
             Isa::Avx512 => unsafe { self.chunk_sums_avx512(tris, ends, samples, want_grad) },
             #[cfg(target_arch = "x86_64")]
             // SAFETY: the running CPU supports AVX2 and FMA (`Isa::best` checked it).
-            Isa::Avx2 => unsafe { self.chunk_sums_avx2(tris, ends, samples, want_grad) },
+            Isa::Avx2Fma => unsafe { self.chunk_sums_avx2(tris, ends, samples, want_grad) },
+            Isa::Portable => self.chunk_sums_with(tris, ends, samples, want_grad),
+            #[cfg(not(target_arch = "x86_64"))]
             _ => self.chunk_sums_with(tris, ends, samples, want_grad),
         }
     }
@@ -290,18 +293,18 @@ mod tests {
                 baseline
             );
             #[cfg(target_arch = "x86_64")]
+            for isa in [Isa::Avx2Fma, Isa::Avx512]
+                .into_iter()
+                .filter(|i| i.is_supported())
             {
-                use std::arch::is_x86_feature_detected as has;
-                if has!("avx2") && has!("fma") {
-                    // SAFETY: checked just above.
-                    let avx2 = unsafe { dice.chunk_sums_avx2(&tris, &ends, &samples, true) };
-                    assert_eq!(bits(&avx2), baseline, "AVX2, {layers} layers");
-                }
-                if has!("avx512f") {
-                    // SAFETY: checked just above.
-                    let avx512 = unsafe { dice.chunk_sums_avx512(&tris, &ends, &samples, true) };
-                    assert_eq!(bits(&avx512), baseline, "AVX-512, {layers} layers");
-                }
+                // SAFETY: the CPU supports `isa`, checked just above.
+                let sums = unsafe {
+                    match isa {
+                        Isa::Avx512 => dice.chunk_sums_avx512(&tris, &ends, &samples, true),
+                        _ => dice.chunk_sums_avx2(&tris, &ends, &samples, true),
+                    }
+                };
+                assert_eq!(bits(&sums), baseline, "{isa:?}, {layers} layers");
             }
         }
     }

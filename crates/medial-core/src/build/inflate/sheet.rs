@@ -99,12 +99,7 @@ impl MedialSheet {
     /// The points after one Loop subdivision (the atoms of the template inflated from it): a
     /// point per vertex and per edge.
     pub fn subdivided_point_count(&self) -> usize {
-        let mut edges: Vec<(usize, usize)> = (self.triangles().iter())
-            .flat_map(|t| (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]))))
-            .collect();
-        edges.sort_unstable();
-        edges.dedup();
-        self.points().len() + edges.len()
+        self.points().len() + Edges::new(self.triangles()).len()
     }
 
     /// The radius of every medial point (mm).

@@ -88,10 +88,16 @@ impl Lattice {
         ((-b + disc.sqrt()) / 2.0).max(0.0)
     }
 
-    /// The number of points of the hexagon of `rings` rows and `stretch = ρ·rings`.
-    pub fn points_for(rings: usize, ratio: f64) -> usize {
-        let stretch = (ratio * rings as f64).round() as usize;
+    /// The number of points `V` of the hexagon of `rings` rows either side and `stretch`.
+    pub fn point_count(rings: usize, stretch: usize) -> usize {
         (2 * rings + 1) * (stretch + 1) + rings * (3 * rings + 1)
+    }
+
+    /// The number of points of that hexagon after one Loop subdivision, a point per vertex and
+    /// per edge: `V + E = 4V − B − 3` (a triangulated disc has `E = 3V − B − 3` edges), with
+    /// `B = 6·rings + 2·stretch` points on its border.
+    pub fn subdivided_count(rings: usize, stretch: usize) -> usize {
+        4 * Self::point_count(rings, stretch) - 6 * rings - 2 * stretch - 3
     }
 }
 
@@ -108,9 +114,18 @@ mod tests {
     fn a_regular_hexagon_is_the_hex_disc_and_a_stretched_one_tiles_its_outline() {
         for (rings, stretch) in [(1, 0), (3, 0), (2, 5), (4, 7)] {
             let l = Lattice::new(rings, stretch);
+            assert_eq!(l.points.len(), Lattice::point_count(rings, stretch));
+            assert_eq!(l.border.len(), 6 * rings + 2 * stretch);
+            let mut edges: Vec<(usize, usize)> = (l.triangles.iter())
+                .flat_map(|t| {
+                    (0..3).map(move |k| (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3])))
+                })
+                .collect();
+            edges.sort_unstable();
+            edges.dedup();
             assert_eq!(
-                l.points.len(),
-                Lattice::points_for(rings, stretch as f64 / rings as f64)
+                l.points.len() + edges.len(),
+                Lattice::subdivided_count(rings, stretch)
             );
             if stretch == 0 {
                 assert_eq!(l.points.len(), 1 + 3 * rings * (rings + 1));

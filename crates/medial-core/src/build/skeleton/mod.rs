@@ -402,9 +402,9 @@ fn usable(chart: &Chart, cloud: &ChartedCloud) -> Vec<([f64; 2], Vec3)> {
 
 /// The lattice hexagon (`rings` in 2 ..= 64, `stretch`) for `sampling` on a region of `area`
 /// mm² and elongation `L²/A` ([`Lattice::stretch_ratio`] `ρ`): for `n` atoms, the hexagon
-/// whose atoms after one Loop subdivision (a point per vertex and per edge: `4V − B − 3` for
-/// `V` points, `B = 6·rings + 2·stretch` of them on the border) are nearest `n` in ratio; for a
-/// spacing `s` after subdivision, the one whose `V` is nearest `area / ((√3/2)(2s)²)`. Taken
+/// whose atoms after one Loop subdivision ([`Lattice::subdivided_count`]) are nearest `n` in
+/// ratio; for a spacing `s` after subdivision, the one whose `V` points
+/// ([`Lattice::point_count`]) are nearest `area / ((√3/2)(2s)²)`. Taken
 /// over the whole rings either side of `√(V/(3 + 2ρ))` (`V ≈ rings²·(3 + 2ρ)`) and, for an
 /// elongated region (`ρ > 0`), the stretches within [`STRETCH_SLACK`] of `ρ·rings` (at least
 /// one edge either way): rounding the rings alone would take 2.6 rings to 3, 1.6 times the
@@ -431,12 +431,11 @@ fn lattice_of(sampling: Sampling, area: f64, elongation: f64) -> Result<(usize, 
             (lo as usize..=(hi as usize).max(lo as usize)).map(move |s| (r, s.min(16 * r)))
         });
     let off = |&(r, s): &(usize, usize)| {
-        let lattice = (2 * r + 1) * (s + 1) + r * (3 * r + 1);
         let (count, aim) = match sampling {
-            Sampling::Atoms(n) => ((4 * lattice - 6 * r - 2 * s - 3) as f64, n as f64),
-            _ => (lattice as f64, points),
+            Sampling::Atoms(n) => (Lattice::subdivided_count(r, s), n as f64),
+            _ => (Lattice::point_count(r, s), points),
         };
-        (count / aim).ln().abs()
+        (count as f64 / aim).ln().abs()
     };
     Ok(candidates
         .min_by(|a, b| off(a).total_cmp(&off(b)))

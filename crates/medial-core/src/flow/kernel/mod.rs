@@ -27,7 +27,7 @@ use crate::{Error, Result};
 pub(crate) const LANES: usize = 8;
 
 pub(crate) use field::{map_points, PointMap, Sources};
-pub(crate) use lanes::{F64Lanes, Real};
+pub(crate) use lanes::{F64Lanes, Isa, Real};
 pub(crate) use sweep::{PairSweep, PairTerms};
 
 /// Largest kernel tolerance ε: below `e^{−1/2}` the cutoff radius exceeds σ, which the bound
