@@ -237,6 +237,12 @@ pub struct StageConfig {
     /// (default: off, every AL iteration runs).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub settle_constraint: Option<f64>,
+    /// Coarse to fine in time: the AL iterations before the last (or before the one after an
+    /// AL iteration that settled) run the flow in this many time steps, a divisor of
+    /// `flow.time_steps` below it; the momenta are then carried to the flow's steps, each
+    /// repeated (default: off, every AL iteration in `flow.time_steps`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coarse_time_steps: Option<usize>,
     /// The attachment's relative change over an AL iteration at most which it has settled.
     #[serde(default = "defaults::settle_data_change")]
     pub settle_data_change: f64,
@@ -352,6 +358,7 @@ impl StageConfig {
             max_iterations: defaults::max_iterations(),
             first_iterations: None,
             settle_constraint: None,
+            coarse_time_steps: None,
             settle_data_change: defaults::settle_data_change(),
             gradient_tolerance: defaults::gradient_tolerance(),
             relative_decrease: defaults::relative_decrease(),
@@ -438,6 +445,14 @@ impl Config {
                 return Err(format!("two stages are named '{}'", s.name));
             }
             s.check().map_err(|e| format!("stage '{}': {e}", s.name))?;
+            if let Some(c) = s.coarse_time_steps {
+                if c == 0 || c >= f.time_steps || f.time_steps % c != 0 {
+                    return Err(format!(
+                        "stage '{}': coarse_time_steps ({c}) must divide flow.time_steps ({}) and be below it",
+                        s.name, f.time_steps
+                    ));
+                }
+            }
         }
         Ok(())
     }
@@ -677,6 +692,21 @@ target = "s.vtk"
         ] {
             let e = check(extra).unwrap_err();
             assert!(e.contains(named), "{extra}: {e}");
+        }
+    }
+
+    #[test]
+    fn coarse_time_steps_must_divide_the_flows_steps() {
+        // MINIMAL's flow has the default 40 steps.
+        let check = |steps: usize| {
+            let text = format!("{MINIMAL}coarse_time_steps = {steps}\n");
+            toml::from_str::<Config>(&text).unwrap().check()
+        };
+        check(20).unwrap();
+        check(8).unwrap();
+        for steps in [0, 3, 40, 80] {
+            let e = check(steps).unwrap_err();
+            assert!(e.contains("coarse_time_steps"), "{steps}: {e}");
         }
     }
 }

@@ -154,6 +154,10 @@ impl FitPlan {
                 ]
             }
         };
+        let mut stages = stages;
+        for stage in stages.iter_mut().filter(|s| s.al_iterations > 1) {
+            stage.coarse_time_steps = Some(a.coarse_time_steps);
+        }
         let mut config = self.config_of(template, stages);
         config.flow.time_steps = a.time_steps;
         config.flow.sigma = (a.sigma_factor * self.sigma * 100.0).round() / 100.0;
@@ -256,6 +260,27 @@ struct FirstIteration {
 struct Automatic {
     /// Time steps N.
     time_steps: usize,
+    /// `coarse_time_steps` of every stage of more than one AL iteration: the AL iterations
+    /// before the last run in 5 steps while their step strain stays below 0.5 (see
+    /// `medial_core::fit::augmented_lagrangian`). Measured against N = 10 throughout (the
+    /// resolved configs of this schedule, evaluations, figures; whole-process seconds in the
+    /// README):
+    /// - images (voxel Dice, max angle, max mismatch): t001-bent 427 → 363, 0.988, 0.012°,
+    ///   0.015 % → 0.989, 0.028°, 0.027 %; hard 508 → 461, 0.987, 0.15°, 0.09 % → 0.989,
+    ///   0.07°, 0.08 %; toy 296 → 412, 0.984, 0.05°, 0.014 % → 0.984, 0.02°, 0.007 % (no longer
+    ///   settled after 4 AL iterations: the last one runs in 10 steps); cup 278 → 344, 0.981,
+    ///   0.13°, 0.011 % → 0.981, 0.08°, 0.014 %; the anterior mitral leaflet strained past the
+    ///   limit at the 10th iteration and ran in 10 steps from its start: the same bits, 13
+    ///   evaluations more;
+    /// - points (mean distance): t001-bent 779 → 777, 0.016 → 0.015 mm; hard 766 → 760, 0.158
+    ///   → 0.157 mm; toy 418 → 360, 0.192 mm both;
+    /// - surfaces (the second varifold stage; mean distance): toy 829 → 878, 0.090 → 0.101
+    ///   mm; cup 646 → 621, 0.216 → 0.217 mm; t001-bent 852 → 901, 0.039 → 0.035 mm; hard 897 →
+    ///   918, 0.056 → 0.055 mm; the placenta 878 → 878, 0.289 → 0.241 mm.
+    ///
+    /// Coarse only in the first AL iteration, then 10 steps, was measured too: evaluations in
+    /// between, the constraints looser (t001-bent 0.042°, the leaflet 0.67° and 0.96 %).
+    coarse_time_steps: usize,
     /// The kernel width, a fraction of the configs' [`Geometry::sigma`].
     sigma_factor: f64,
     /// Against an image (Dice).
@@ -305,6 +330,7 @@ struct Automatic {
 /// 913 against 1,037, t001-bent 0.015 in 965 against 1,252, toy 0.192 in 418 against 455).
 const AUTOMATIC: Automatic = Automatic {
     time_steps: 10,
+    coarse_time_steps: 5,
     sigma_factor: SIGMA_FACTOR,
     dice: Schedule {
         mu: 2.0,

@@ -26,6 +26,8 @@ pub struct LogRow<'a> {
     pub grad_norm: f64,
     /// Seconds since the fit started.
     pub seconds: f64,
+    /// Time steps of the flow of this minimisation (coarse or the config's).
+    pub time_steps: usize,
 }
 
 /// `log.csv`, written to `log.csv.part` in the result folder as the fit goes (flushed row by
@@ -38,7 +40,7 @@ pub struct Log {
     finished: bool,
 }
 
-const LOG_HEADER: &str = "stage,al_iteration,iteration,evaluations,mu,total,kinetic,data,penalty,max_abs_constraint,max_spoke_normal_deg,max_spoke_mismatch_pct,grad_norm,seconds,dice";
+const LOG_HEADER: &str = "stage,al_iteration,iteration,evaluations,mu,total,kinetic,data,penalty,max_abs_constraint,max_spoke_normal_deg,max_spoke_mismatch_pct,grad_norm,seconds,dice,time_steps";
 
 impl Log {
     /// Starts `path` (as `path.part`) with `earlier`, the log of a checkpoint up to it, or
@@ -64,7 +66,7 @@ impl Log {
         let f = r.figures;
         let opt = |x: Option<f64>| x.map(|v| format!("{v:.9e}")).unwrap_or_default();
         let line = format!(
-            "{},{},{},{},{:e},{:.12e},{:.9e},{:.9e},{:.9e},{:.6e},{},{},{:.6e},{:.3},{}\n",
+            "{},{},{},{},{:e},{:.12e},{:.9e},{:.9e},{:.9e},{:.6e},{},{},{:.6e},{:.3},{},{}\n",
             csv_field(r.stage),
             r.al_iteration,
             r.iteration,
@@ -80,6 +82,7 @@ impl Log {
             r.grad_norm,
             r.seconds,
             opt(f.dice),
+            r.time_steps,
         );
         self.append(&line)
     }

@@ -157,6 +157,7 @@ pub fn prepare(stage: &StageConfig, model: &Model) -> Result<Prepared, CliError>
                 max_abs_constraint,
                 data_change: stage.settle_data_change,
             }),
+            coarse_time_steps: stage.coarse_time_steps,
         },
         lbfgs: LbfgsOptions {
             max_iterations: stage.max_iterations,

@@ -576,6 +576,7 @@ impl Watch {
                     figures: &figures,
                     grad_norm: p.report.gradient_norm,
                     seconds: self.clock.seconds(),
+                    time_steps: p.time_steps,
                 };
                 self.progress.update(&row);
                 if let Err(e) = self.log.row(&row) {

@@ -13,7 +13,7 @@ use crate::fit::optimize::{
     minimize, IterationReport, LbfgsOptions, Minimization, MinimizerCheckpoint, Minimum, Start,
     StopReason,
 };
-use crate::flow::Flow;
+use crate::flow::{retime_momenta, Flow};
 use crate::{Error, Result, Vec3};
 use serde::{Deserialize, Serialize};
 use std::cell::Cell;
@@ -47,6 +47,13 @@ pub struct AlSchedule {
     /// Ends the schedule once an AL iteration has settled, before its last (none: every AL
     /// iteration runs); a last AL iteration that settles marks the stage settled too.
     pub settle: Option<Settle>,
+    /// Coarse to fine in time: the AL iterations before the last (or before the one after an
+    /// AL iteration that settled) run the flow in this many time steps, which must divide the
+    /// stage's `N`; then the momenta are carried to the `N` steps ([`retime_momenta`]) and the
+    /// multipliers with them ([`retime_multipliers`]), and the schedule goes on in `N` steps.
+    /// Each evaluation of a coarse AL iteration costs about `coarse/N` of a fine one. None:
+    /// every AL iteration in `N` steps.
+    pub coarse_time_steps: Option<usize>,
 }
 
 /// When an AL schedule has settled: at the end of an AL iteration after the first,
@@ -80,11 +87,27 @@ impl Default for AlSchedule {
             mu_update: MuUpdate::Always,
             first_iterations: None,
             settle: None,
+            coarse_time_steps: None,
         }
     }
 }
 
 impl AlSchedule {
+    /// The flow of the coarse AL iterations of a stage in `fine`, when there are any: a
+    /// coarse step count that divides `N`, below it, and at least two AL iterations.
+    fn coarse_flow(&self, fine: &Flow) -> Result<Option<Flow>> {
+        let Some(steps) = self.coarse_time_steps.filter(|_| self.iterations > 1) else {
+            return Ok(None);
+        };
+        let n = fine.time_steps();
+        if steps == 0 || steps >= n || n % steps != 0 {
+            return Err(Error::InvalidParameter(format!(
+                "coarse_time_steps must divide the flow's {n} time steps and be below them, got {steps}"
+            )));
+        }
+        fine.with_time_steps(steps).map(Some)
+    }
+
     fn check(&self) -> Result<()> {
         let ok = self.mu.is_finite()
             && self.mu > 0.0
@@ -131,6 +154,9 @@ pub struct Progress<'r> {
     pub al_iteration: usize,
     /// `μ` of this AL iteration (0 without constraints).
     pub mu: f64,
+    /// Time steps of the flow of this minimisation: the stage's `N`, or its coarse steps
+    /// ([`AlSchedule::coarse_time_steps`]).
+    pub time_steps: usize,
     /// The L-BFGS iteration.
     pub report: &'r IterationReport<'r>,
 }
@@ -215,6 +241,13 @@ pub struct StageCheckpoint {
     previous_data: f64,
     /// `E` at the start of the stage, the reference of the divergence guard.
     guard_start: Option<f64>,
+    /// Set while the schedule is in its coarse AL iterations (momenta and `λ` in coarse steps).
+    #[serde(default)]
+    coarse: Option<CoarsePhase>,
+    /// The momenta, in the stage's steps, from which the coarse minimisation in progress would
+    /// run again in those steps (empty in fine steps).
+    #[serde(default)]
+    coarse_start: Vec<f64>,
     /// The finished minimisations of the stage (its `momenta` are not used).
     done: StageOutcome,
     minimizer: MinimizerCheckpoint,
@@ -234,18 +267,24 @@ impl StageCheckpoint {
     /// The stage as it stands: the last accepted iterate, with the multipliers and `μ` of the
     /// minimisation in progress (which give its figures again), the counters of every
     /// minimisation so far, and [`StopReason::Paused`] as the stop of the one in progress.
+    /// In coarse AL iterations the momenta and `λ` are carried to the stage's steps (and then
+    /// give its figures only approximately).
     pub fn partial(&self) -> StageOutcome {
         let m = &self.minimizer;
         let mut stops = self.done.stops.clone();
         stops.push(StopReason::Paused);
+        let (momenta, lambda) = match self.coarse {
+            Some(p) => p.refined(m.momenta(), &self.lambda, self.lambda.len() / p.steps),
+            None => (m.momenta().to_vec(), self.lambda.clone()),
+        };
         StageOutcome {
-            momenta: m.momenta().to_vec(),
+            momenta,
             evaluation: m.evaluation().clone(),
             iterations: self.done.iterations + m.iterations(),
             evaluations: self.done.evaluations + m.evaluations(),
             al_iterations: self.done.al_iterations + 1,
             mu: self.mu,
-            lambda: self.lambda.clone(),
+            lambda,
             stops,
             restarts: self.done.restarts + m.restarts(),
             unsound: None,
@@ -253,15 +292,55 @@ impl StageCheckpoint {
         }
     }
 
-    /// The momenta of the last accepted iterate.
-    pub fn momenta(&self) -> &[f64] {
-        self.minimizer.momenta()
+    /// The number of momenta of the stage's flow (`N·k·3`, also while in coarse steps).
+    pub fn momenta_len(&self) -> usize {
+        let len = self.minimizer.momenta().len();
+        self.coarse.map_or(len, |p| len / p.steps * p.fine_steps)
     }
+}
+
+/// The coarse AL iterations of a stage ([`AlSchedule::coarse_time_steps`]): their step count
+/// and the stage's.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+struct CoarsePhase {
+    steps: usize,
+    fine_steps: usize,
+}
+
+impl CoarsePhase {
+    /// Momenta and multipliers of the coarse steps carried to the stage's (`l` constraints).
+    fn refined(&self, momenta: &[f64], lambda: &[f64], l: usize) -> (Vec<f64>, Vec<f64>) {
+        let k = momenta.len() / (3 * self.steps);
+        let momenta = retime_momenta(momenta, k, self.steps, self.fine_steps)
+            .expect("the coarse steps divide the stage's");
+        let lambda = retime_multipliers(lambda, l, self.steps, self.fine_steps);
+        (momenta, lambda)
+    }
+}
+
+/// Multipliers of `l` constraints at the time points `1 … from` (time point after time point)
+/// carried to `1 … to`, `to = f·from`: interpolated linearly in time (`λ^0` taken as `λ^1`) and
+/// divided by `f`, since the penalty then sums over `f` times as many time points.
+pub fn retime_multipliers(lambda: &[f64], l: usize, from: usize, to: usize) -> Vec<f64> {
+    let f = to / from;
+    let at = |n: usize| &lambda[(n.max(1) - 1) * l..n.max(1) * l];
+    (1..=to)
+        .flat_map(|m| {
+            let (n, r) = (m / f, (m % f) as f64 / f as f64);
+            let (a, b) = (at(n), at((n + 1).min(from)));
+            (0..l).map(move |j| ((1.0 - r) * a[j] + r * b[j]) / f as f64)
+        })
+        .collect()
 }
 
 /// The AL schedule of a stage as it runs.
 struct Schedule {
     al_iteration: usize,
+    /// Set while in the coarse AL iterations.
+    coarse: Option<CoarsePhase>,
+    /// The momenta, in the stage's steps, from which the coarse minimisation in progress would
+    /// run again in those steps: the stage's start, or the previous coarse AL iteration's end.
+    coarse_start: Vec<f64>,
     mu: f64,
     lambda: Vec<f64>,
     previous_violation: f64,
@@ -271,14 +350,20 @@ struct Schedule {
 
 impl Schedule {
     /// The start of the schedule: `λ = 0` and `μ = μ₀` with constraints, no `λ` and `μ = 0`
-    /// without.
-    fn new(stage: &Stage<'_>, schedule: &AlSchedule) -> Self {
+    /// without; in the coarse steps of `coarse` when given.
+    fn new(stage: &Stage<'_>, schedule: &AlSchedule, coarse: Option<&Flow>) -> Self {
+        let flow = coarse.unwrap_or(stage.flow);
         let (mu, lambda) = match stage.constraints {
-            Some(c) => (schedule.mu, vec![0.0; stage.flow.time_steps() * c.len()]),
+            Some(c) => (schedule.mu, vec![0.0; flow.time_steps() * c.len()]),
             None => (0.0, Vec::new()),
         };
         Self {
             al_iteration: 0,
+            coarse: coarse.map(|c| CoarsePhase {
+                steps: c.time_steps(),
+                fine_steps: stage.flow.time_steps(),
+            }),
+            coarse_start: Vec::new(),
             mu,
             lambda,
             previous_violation: f64::INFINITY,
@@ -299,27 +384,55 @@ impl Schedule {
         }
     }
 
-    /// The schedule of a paused stage, checked against the stage.
-    fn resumed(stage: &Stage<'_>, c: &StageCheckpoint, iterations: usize) -> Result<Self> {
-        let lambda_len = stage
-            .constraints
-            .map_or(0, |k| stage.flow.time_steps() * k.len());
-        if c.lambda.len() != lambda_len || c.al_iteration >= iterations {
+    /// The schedule of a paused stage, checked against the stage (whose coarse flow, if any,
+    /// is `coarse`).
+    fn resumed(
+        stage: &Stage<'_>,
+        c: &StageCheckpoint,
+        iterations: usize,
+        coarse: Option<&Flow>,
+    ) -> Result<Self> {
+        let steps = c.coarse.map_or(stage.flow.time_steps(), |p| p.steps);
+        let lambda_len = stage.constraints.map_or(0, |k| steps * k.len());
+        let coarse_fits = c.coarse.map_or(true, |p| {
+            coarse.is_some_and(|f| f.time_steps() == p.steps)
+                && p.fine_steps == stage.flow.time_steps()
+        });
+        if c.lambda.len() != lambda_len || c.al_iteration >= iterations || !coarse_fits {
             return Err(Error::InvalidParameter(format!(
                 "the checkpoint does not fit the stage: AL iteration {} of {iterations}, {} \
-                 multipliers for {lambda_len}",
+                 multipliers for {lambda_len}, in {steps} time steps",
                 c.al_iteration,
                 c.lambda.len()
             )));
         }
         Ok(Self {
             al_iteration: c.al_iteration,
+            coarse: c.coarse,
+            coarse_start: c.coarse_start.clone(),
             mu: c.mu,
             lambda: c.lambda.clone(),
             previous_violation: c.previous_violation,
             previous_data: c.previous_data,
             outcome: c.done.clone(),
         })
+    }
+
+    /// Leaves the coarse steps in the middle of the minimisation `m`, whose flow strained
+    /// space too far: `m` is dropped (its counters kept), and the AL iteration runs again in
+    /// the stage's steps from where it started, momenta and `λ` carried to those steps.
+    /// Returns the carried momenta.
+    fn leave_coarse(&mut self, stage: &Stage<'_>, m: &MinimizerCheckpoint) -> Vec<f64> {
+        let phase = self
+            .coarse
+            .take()
+            .expect("only coarse minimisations are strained");
+        self.outcome.iterations += m.iterations();
+        self.outcome.evaluations += m.evaluations();
+        self.outcome.restarts += m.restarts();
+        let l = lambda_count(stage);
+        self.lambda = retime_multipliers(&self.lambda, l, phase.steps, phase.fine_steps);
+        std::mem::take(&mut self.coarse_start)
     }
 
     /// The checkpoint of the schedule paused in the minimisation `minimizer`.
@@ -331,6 +444,8 @@ impl Schedule {
             previous_violation: self.previous_violation,
             previous_data: self.previous_data,
             guard_start,
+            coarse: self.coarse,
+            coarse_start: self.coarse_start,
             done: self.outcome,
             minimizer,
         }
@@ -351,21 +466,27 @@ pub fn run_stage(
     pause: &dyn Fn() -> bool,
     mut progress: impl FnMut(&Progress<'_>),
 ) -> Result<StageRun> {
-    let al_iterations = match stage.constraints {
+    let (al_iterations, coarse) = match stage.constraints {
         Some(_) => {
             schedule.check()?;
-            schedule.iterations
+            (schedule.iterations, schedule.coarse_flow(stage.flow)?)
         }
-        None => 1,
+        None => (1, None),
     };
     let (mut at, guard_start, mut minimizer_start) = match start {
-        StageStart::Momenta(momenta) => (
-            Schedule::new(stage, schedule),
-            None,
-            Start::Momenta(momenta),
-        ),
+        StageStart::Momenta(momenta) => {
+            let mut at = Schedule::new(stage, schedule, coarse.as_ref());
+            let start = match &coarse {
+                Some(c) => c.retimed_momenta(&momenta, stage.flow.time_steps())?,
+                None => momenta.clone(),
+            };
+            if coarse.is_some() {
+                at.coarse_start = momenta;
+            }
+            (at, None, Start::Momenta(start))
+        }
         StageStart::Resume(c) => (
-            Schedule::resumed(stage, &c, al_iterations)?,
+            Schedule::resumed(stage, &c, al_iterations, coarse.as_ref())?,
             c.guard_start,
             Start::Resume(Box::new(c.minimizer)),
         ),
@@ -378,11 +499,21 @@ pub fn run_stage(
     };
     loop {
         let (al_iteration, mu) = (at.al_iteration, at.mu);
-        let objective = objective_of(stage, mu, &at.lambda)?;
+        let flow = match (&at.coarse, &coarse) {
+            (Some(_), Some(c)) => c,
+            _ => stage.flow,
+        };
+        let objective = objective_of(stage, flow, mu, &at.lambda)?;
+        let strained = Cell::new(false);
+        let in_coarse = at.coarse.is_some();
         let report = |r: &IterationReport<'_>| {
+            if in_coarse && r.iteration > 0 && r.iteration % STRAIN_CHECK_INTERVAL == 0 {
+                strained.set(too_strained(flow, stage.initial, r.momenta));
+            }
             progress(&Progress {
                 al_iteration,
                 mu,
+                time_steps: flow.time_steps(),
                 report: r,
             })
         };
@@ -393,8 +524,20 @@ pub fn run_stage(
             },
             _ => *options,
         };
-        let min = match minimize(&objective, minimizer_start, &options, check, pause, report)? {
+        let pause_or_strained = || strained.get() || pause();
+        let min = match minimize(
+            &objective,
+            minimizer_start,
+            &options,
+            check,
+            &pause_or_strained,
+            report,
+        )? {
             Minimization::Done(min) => min,
+            Minimization::Paused(m) if strained.get() => {
+                minimizer_start = Start::Momenta(at.leave_coarse(stage, &m));
+                continue;
+            }
             Minimization::Paused(m) => {
                 return Ok(StageRun::Paused(Box::new(at.paused(stage_start.get(), *m))))
             }
@@ -413,8 +556,18 @@ pub fn run_stage(
             && outcome.unsound.is_none()
             && (schedule.settle).is_some_and(|s| s.holds(&outcome.evaluation, at.previous_data));
         at.previous_data = outcome.evaluation.data;
-        if outcome.unsound.is_some() || outcome.settled || al_iteration + 1 == al_iterations {
+        let coarse_settled = at.coarse.is_some() && outcome.settled;
+        if outcome.unsound.is_some()
+            || (outcome.settled && !coarse_settled)
+            || al_iteration + 1 == al_iterations
+        {
             at.outcome.momenta = min.momenta;
+            if let Some(phase) = at.coarse {
+                // An unsound stop in coarse steps: its last sound iterate in the stage's steps.
+                let (momenta, lambda) = (&at.outcome.momenta, &at.outcome.lambda);
+                (at.outcome.momenta, at.outcome.lambda) =
+                    phase.refined(momenta, lambda, lambda_count(stage));
+            }
             return Ok(StageRun::Done(Box::new(at.outcome)));
         }
         let values = objective.constraint_values(&min.momenta)?;
@@ -436,18 +589,51 @@ pub fn run_stage(
             at.mu = (mu * factor).min(schedule.mu_max);
         }
         at.al_iteration += 1;
-        minimizer_start = Start::Momenta(min.momenta);
+        let mut momenta = min.momenta;
+        if let Some(phase) = at.coarse {
+            let (fine, fine_lambda) = phase.refined(&momenta, &at.lambda, lambda_count(stage));
+            if coarse_settled || at.al_iteration + 1 == al_iterations {
+                (momenta, at.lambda, at.coarse) = (fine, fine_lambda, None);
+            } else {
+                at.coarse_start = fine;
+            }
+        }
+        minimizer_start = Start::Momenta(momenta);
     }
 }
 
-/// The objective of `stage` with the penalty `(μ, λ)` when it has constraints.
-fn objective_of<'a>(stage: &Stage<'a>, mu: f64, lambda: &'a [f64]) -> Result<Objective<'a>> {
-    let objective = Objective::new(
-        stage.flow,
-        stage.initial,
-        stage.attachment,
-        stage.data_weight,
-    );
+/// How often the coarse flow's step strain is checked, L-BFGS iterations.
+const STRAIN_CHECK_INTERVAL: usize = 10;
+
+/// The largest step strain `dt · max_i ‖∇v^n(q^n_i)‖` ([`Flow::step_strains`]) of the coarse
+/// flow at which its AL iterations go on. Past it a coarse step is far from the `N/coarse`
+/// fine steps that replace it: they differ by about `dt²/2 · ∇v·v`, i.e. by a fraction
+/// `strain/2` of the step. The anterior mitral leaflet, at σ = 0.37 mm, passes 0.5 at N = 5
+/// within 10 iterations (1.01 at the end), and carried to N = 10 then violates its constraints
+/// at the new time points by 13°; the automatic t001-sized fits stay at 0.17–0.47.
+const COARSE_STRAIN_LIMIT: f64 = 0.5;
+
+/// Whether the flow under `u` from `q0` strains space past [`COARSE_STRAIN_LIMIT`] in a step.
+fn too_strained(flow: &Flow, q0: &[Vec3], u: &[f64]) -> bool {
+    let strains = flow.shoot(q0, u).and_then(|t| flow.step_strains(&t, u));
+    // A NaN strain counts as past the limit.
+    strains.map_or(true, |s| s.iter().any(|x| x.is_nan() || *x > COARSE_STRAIN_LIMIT))
+}
+
+/// The number of constraints of `stage` (0 without).
+fn lambda_count(stage: &Stage<'_>) -> usize {
+    stage.constraints.map_or(0, |c| c.len())
+}
+
+/// The objective of `stage` in `flow` (the stage's, or its coarse one) with the penalty `(μ, λ)`
+/// when it has constraints.
+fn objective_of<'a>(
+    stage: &Stage<'a>,
+    flow: &'a Flow,
+    mu: f64,
+    lambda: &'a [f64],
+) -> Result<Objective<'a>> {
+    let objective = Objective::new(flow, stage.initial, stage.attachment, stage.data_weight);
     match stage.constraints {
         Some(constraints) => objective.with_penalty(Penalty {
             constraints,

@@ -190,11 +190,11 @@ fn check_fits(c: &Checkpoint, stages: usize, len: usize) -> Result<()> {
             c.stage() + 1
         )));
     }
-    if c.current.momenta().len() != len {
+    if c.current.momenta_len() != len {
         return Err(Error::ShapeMismatch {
             what: "momenta of the checkpoint".into(),
             expected: len,
-            found: c.current.momenta().len(),
+            found: c.current.momenta_len(),
         });
     }
     Ok(())
@@ -213,8 +213,9 @@ mod tests {
     use crate::Vec3;
     use std::cell::Cell;
 
-    /// What a report says about an iteration, bit for bit.
-    type Row = (usize, usize, usize, usize, u64, u64);
+    /// What a report says about an iteration, bit for bit (stage, AL iteration, iteration,
+    /// evaluations, μ, E, time steps).
+    type Row = (usize, usize, usize, usize, u64, u64, usize);
 
     /// Two stages on the hexagonal bipyramid: SSD without constraints towards its boundary
     /// rotated, stretched and shifted, then constrained SSD over three AL iterations.
@@ -228,15 +229,21 @@ mod tests {
 
     impl Case {
         fn new() -> Self {
+            Self::with(1.1, 4)
+        }
+
+        /// The case with the target boundary scaled by `scale` and `time_steps` steps (1.1 and
+        /// 4 in [`Case::new`]).
+        fn with(scale: f64, time_steps: usize) -> Self {
             let t = bipyramid(0.4);
             let r = nalgebra::Rotation3::from_euler_angles(0.2, -0.1, 0.3);
             let targets = t
                 .boundary_points()
                 .iter()
-                .map(|p| r * p * 1.1 + Vec3::new(0.1, 0.0, -0.05));
+                .map(|p| r * p * scale + Vec3::new(0.1, 0.0, -0.05));
             let params = FlowParams {
                 sigma: 0.8,
-                time_steps: 4,
+                time_steps,
                 kinetic_weight: 0.01,
             };
             Self {
@@ -246,6 +253,14 @@ mod tests {
                 constraints: MedialConstraints::new(&t),
                 guard: Guard::of_template(&t),
             }
+        }
+
+        /// [`Case::plan`] with the constrained stage coarse to fine in time, in half the steps
+        /// before its last AL iteration.
+        fn coarse_plan(&self) -> Vec<PlannedStage<'_>> {
+            let mut plan = self.plan();
+            plan[1].schedule.coarse_time_steps = Some(self.flow.time_steps() / 2);
+            plan
         }
 
         fn plan(&self) -> Vec<PlannedStage<'_>> {
@@ -311,6 +326,7 @@ mod tests {
                     r.evaluations,
                     progress.mu.to_bits(),
                     r.evaluation.total.to_bits(),
+                    progress.time_steps,
                 ));
                 count.set(count.get() + 1);
             }
@@ -356,9 +372,13 @@ mod tests {
     #[test]
     fn a_fit_paused_anywhere_and_resumed_ends_with_the_same_bits() {
         let case = Case::new();
-        let plan = case.plan();
+        paused_anywhere_and_resumed(&case.plan());
+        paused_anywhere_and_resumed(&case.coarse_plan());
+    }
+
+    fn paused_anywhere_and_resumed(plan: &[PlannedStage<'_>]) {
         let mut baseline_rows = Vec::new();
-        let baseline = complete(run(&plan, None, |_| false, &mut baseline_rows));
+        let baseline = complete(run(plan, None, |_| false, &mut baseline_rows));
         assert_eq!(baseline.len(), 2);
         assert_eq!(baseline[1].al_iterations, 3);
         let first_of = |stage: usize, al: usize| {
@@ -370,17 +390,22 @@ mod tests {
         // Early in the first stage, the second AL iteration of the second stage, and late in it.
         for at in [2, first_of(1, 1) + 3, baseline_rows.len() - 3] {
             let mut rows = Vec::new();
-            let FitRun::Paused(checkpoint) = run(&plan, None, |n| n >= at, &mut rows) else {
+            let FitRun::Paused(checkpoint) = run(plan, None, |n| n >= at, &mut rows) else {
                 panic!("no pause at row {at}");
             };
             assert_eq!(rows.len(), at, "paused right after the asked row");
             let partial = checkpoint.outcomes();
+            let len = plan[0].stage.flow.momenta_len();
+            assert!(
+                partial.iter().all(|o| o.momenta.len() == len),
+                "in the stage's steps"
+            );
             assert_eq!(
                 partial.last().unwrap().stops.last(),
                 Some(&StopReason::Paused)
             );
             let resumed = complete(run(
-                &plan,
+                plan,
                 Some(round_trip(&checkpoint)),
                 |_| false,
                 &mut rows,
@@ -393,12 +418,18 @@ mod tests {
     #[test]
     fn a_fit_paused_after_every_iterate_ends_with_the_same_bits() {
         let case = Case::new();
-        let plan = case.plan();
+        paused_after_every_iterate(&case.plan());
+        paused_after_every_iterate(&case.coarse_plan());
+        // Coarse AL iterations that go on in coarse steps (the case above leaves them).
+        paused_after_every_iterate(&Case::with(1.1, 8).coarse_plan());
+    }
+
+    fn paused_after_every_iterate(plan: &[PlannedStage<'_>]) {
         let mut baseline_rows = Vec::new();
-        let baseline = complete(run(&plan, None, |_| false, &mut baseline_rows));
+        let baseline = complete(run(plan, None, |_| false, &mut baseline_rows));
         let (mut rows, mut from, mut pauses) = (Vec::new(), None, 0);
         let outcomes = loop {
-            match run(&plan, from.take(), |_| true, &mut rows) {
+            match run(plan, from.take(), |_| true, &mut rows) {
                 FitRun::Complete(outcomes) => break outcomes,
                 FitRun::Paused(c) => {
                     pauses += 1;
@@ -555,5 +586,66 @@ mod tests {
             assert_eq!(outcome.settled, settled);
             assert!(!settled || outcome.converged());
         }
+    }
+
+    /// The time steps of each AL iteration's minimisation as the reports give them.
+    fn steps_per_al_iteration(rows: &[Row]) -> Vec<usize> {
+        let mut steps: Vec<usize> = Vec::new();
+        for r in rows.iter().filter(|r| r.0 == 1) {
+            match r.2 {
+                0 => steps.push(r.6),
+                _ => assert_eq!(Some(&r.6), steps.last(), "one flow per minimisation"),
+            }
+        }
+        steps
+    }
+
+    #[test]
+    fn coarse_al_iterations_run_in_coarse_steps_and_the_last_in_the_stages() {
+        // In 4 steps the coarse flow strains space by less than 0.5 (in 2 it does not).
+        let case = Case::with(1.1, 8);
+        let (mut fine_rows, mut coarse_rows) = (Vec::new(), Vec::new());
+        let fine = complete(run(&case.plan(), None, |_| false, &mut fine_rows));
+        let coarse = complete(run(&case.coarse_plan(), None, |_| false, &mut coarse_rows));
+        assert_eq!(steps_per_al_iteration(&fine_rows), [8, 8, 8]);
+        assert_eq!(steps_per_al_iteration(&coarse_rows), [4, 4, 8]);
+        let (f, c) = (&fine[1], &coarse[1]);
+        assert_eq!(c.momenta.len(), f.momenta.len());
+        assert_eq!(c.lambda.len(), f.lambda.len());
+        // The same stage (after the same first stage), ended in the same steps, no worse for
+        // its cheaper AL iterations (of 12 iterations each: not converged either way).
+        assert_eq!(bits(&fine[..1]), bits(&coarse[..1]));
+        let e = (&f.evaluation, &c.evaluation);
+        assert!(e.1.data <= 1.2 * e.0.data, "{e:?}");
+        assert!(
+            e.1.max_abs_constraint <= 2.0 * e.0.max_abs_constraint.max(1e-3),
+            "{e:?}"
+        );
+        // Its figures are those of its momenta in the stage's flow.
+        let objective = crate::fit::Objective::new(&case.flow, &case.initial, &case.ssd, 1.0);
+        let again = objective.evaluate(&c.momenta, None).unwrap();
+        assert_eq!(again.data.to_bits(), c.evaluation.data.to_bits());
+    }
+
+    #[test]
+    fn a_coarse_flow_that_strains_space_runs_again_in_the_stages_steps() {
+        // Scaled threefold, the coarse flow's 2 steps strain space by more than 0.5 within 10
+        // iterations: the AL iteration starts again in 4 steps, where the stage without coarse
+        // steps starts, and ends with its very bits (only the counters differ).
+        let case = Case::with(3.0, 4);
+        let (mut fine_rows, mut coarse_rows) = (Vec::new(), Vec::new());
+        let fine = complete(run(&case.plan(), None, |_| false, &mut fine_rows));
+        let coarse = complete(run(&case.coarse_plan(), None, |_| false, &mut coarse_rows));
+        assert_eq!(steps_per_al_iteration(&coarse_rows), [2, 4, 4, 4]);
+        let dropped = coarse_rows.iter().filter(|r| r.6 == 2).count();
+        assert_eq!(dropped, 11, "iterations 0 … 10 of the coarse minimisation");
+        let (f, c) = (&fine[1], &coarse[1]);
+        let to_bits = |x: &[f64]| x.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(to_bits(&c.momenta), to_bits(&f.momenta));
+        assert_eq!(to_bits(&c.lambda), to_bits(&f.lambda));
+        assert_eq!(c.evaluation, f.evaluation);
+        assert_eq!(c.iterations, f.iterations + 10);
+        assert!(c.evaluations > f.evaluations);
+        assert_eq!(c.al_iterations, f.al_iterations);
     }
 }

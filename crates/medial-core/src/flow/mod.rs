@@ -34,6 +34,43 @@ pub mod kernel;
 use crate::flow::kernel::{F64Lanes, GaussianKernel, PairSweep, PairTerms, LANES};
 use crate::{Error, Result, Vec3};
 
+/// Momenta of `k` landmarks in `from` time steps (`u[(n·k + i)·3 + c]`) carried to `to` steps,
+/// the control piecewise constant in time: into `to = f·from` steps each step's momenta are
+/// repeated `f` times (each coarse step's velocity field held over its `f` fine steps: to first
+/// order in `dt` the same trajectory and kinetic energy); into `to = from/f` steps each `f`
+/// consecutive steps are averaged. Errors when neither step count divides the other or `u` is
+/// not `from·k·3` numbers.
+pub fn retime_momenta(u: &[f64], k: usize, from: usize, to: usize) -> Result<Vec<f64>> {
+    let k3 = k * 3;
+    if u.len() != from * k3 {
+        return Err(Error::ShapeMismatch {
+            what: "momenta (N·k·3 numbers) to retime".into(),
+            expected: from * k3,
+            found: u.len(),
+        });
+    }
+    let divides = |a: usize, b: usize| a > 0 && b > 0 && b % a == 0;
+    if divides(from, to) {
+        let f = to / from;
+        Ok(u.chunks_exact(k3.max(1))
+            .flat_map(|step| std::iter::repeat(step).take(f).flatten().copied())
+            .collect())
+    } else if divides(to, from) {
+        let f = from / to;
+        let mut out = vec![0.0; to * k3];
+        for (n, step) in u.chunks_exact(k3.max(1)).enumerate() {
+            let target = &mut out[(n / f) * k3..(n / f + 1) * k3];
+            target.iter_mut().zip(step).for_each(|(o, x)| *o += x);
+        }
+        out.iter_mut().for_each(|o| *o /= f as f64);
+        Ok(out)
+    } else {
+        Err(Error::InvalidParameter(format!(
+            "momenta in {from} time steps cannot be carried to {to}: one count must divide the other"
+        )))
+    }
+}
+
 /// Parameters of the flow.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FlowParams {
@@ -113,6 +150,25 @@ impl Flow {
     pub fn with_kernel_tolerance(mut self, tolerance: f64) -> Result<Self> {
         self.kernel = self.kernel.truncated(tolerance)?;
         Ok(self)
+    }
+
+    /// The same flow in `time_steps` steps (σ, `w_kin` and the kernel tolerance kept).
+    pub fn with_time_steps(&self, time_steps: usize) -> Result<Self> {
+        if time_steps == 0 {
+            return Err(Error::InvalidParameter(
+                "time_steps must be at least 1".into(),
+            ));
+        }
+        Ok(Self {
+            steps: time_steps,
+            ..self.clone()
+        })
+    }
+
+    /// Momenta `u` of this flow's landmarks in `from` time steps carried to this flow's `N`
+    /// steps ([`retime_momenta`]).
+    pub fn retimed_momenta(&self, u: &[f64], from: usize) -> Result<Vec<f64>> {
+        retime_momenta(u, self.landmarks, from, self.steps)
     }
 
     /// The kernel.
