@@ -237,12 +237,15 @@ pub struct StageConfig {
     /// (default: off, every AL iteration runs).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub settle_constraint: Option<f64>,
-    /// Coarse to fine in time: the AL iterations before the last (or before the one after an
-    /// AL iteration that settled) run the flow in this many time steps, a divisor of
-    /// `flow.time_steps` below it; the momenta are then carried to the flow's steps, each
-    /// repeated (default: off, every AL iteration in `flow.time_steps`).
+    /// Coarse to fine in time: the first `coarse_al_iterations` AL iterations run the flow in
+    /// this many time steps, a divisor of `flow.time_steps` below it, while it strains space by
+    /// at most 0.5 per step; the momenta are then carried to the flow's steps, each repeated
+    /// (default: off, every AL iteration in `flow.time_steps`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub coarse_time_steps: Option<usize>,
+    /// AL iterations in `coarse_time_steps` steps (default: all but the last).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coarse_al_iterations: Option<usize>,
     /// The attachment's relative change over an AL iteration at most which it has settled.
     #[serde(default = "defaults::settle_data_change")]
     pub settle_data_change: f64,
@@ -359,6 +362,7 @@ impl StageConfig {
             first_iterations: None,
             settle_constraint: None,
             coarse_time_steps: None,
+            coarse_al_iterations: None,
             settle_data_change: defaults::settle_data_change(),
             gradient_tolerance: defaults::gradient_tolerance(),
             relative_decrease: defaults::relative_decrease(),
@@ -368,6 +372,16 @@ impl StageConfig {
             tolerance_deg: defaults::tolerance_deg(),
             tolerance_pct: defaults::tolerance_pct(),
         }
+    }
+
+    /// The AL iterations in coarse time steps, when the stage has them: `coarse_al_iterations`,
+    /// by default all but the last.
+    pub fn coarse_al_iterations(&self) -> Option<usize> {
+        self.coarse_time_steps?;
+        Some(
+            self.coarse_al_iterations
+                .unwrap_or(self.al_iterations.saturating_sub(1)),
+        )
     }
 
     /// The data weight, with the default of the attachment.
@@ -450,6 +464,14 @@ impl Config {
                     return Err(format!(
                         "stage '{}': coarse_time_steps ({c}) must divide flow.time_steps ({}) and be below it",
                         s.name, f.time_steps
+                    ));
+                }
+            }
+            if let Some(a) = s.coarse_al_iterations() {
+                if a == 0 || a >= s.al_iterations {
+                    return Err(format!(
+                        "stage '{}': coarse_al_iterations ({a}) must be at least 1 and below al_iterations ({}): the last AL iteration runs in flow.time_steps",
+                        s.name, s.al_iterations
                     ));
                 }
             }
@@ -699,7 +721,7 @@ target = "s.vtk"
     fn coarse_time_steps_must_divide_the_flows_steps() {
         // MINIMAL's flow has the default 40 steps.
         let check = |steps: usize| {
-            let text = format!("{MINIMAL}coarse_time_steps = {steps}\n");
+            let text = format!("{MINIMAL}al_iterations = 2\ncoarse_time_steps = {steps}\n");
             toml::from_str::<Config>(&text).unwrap().check()
         };
         check(20).unwrap();
@@ -708,5 +730,18 @@ target = "s.vtk"
             let e = check(steps).unwrap_err();
             assert!(e.contains("coarse_time_steps"), "{steps}: {e}");
         }
+        // MINIMAL's stage has one AL iteration: none of them can be coarse.
+        let with = |extra: &str| {
+            let text = format!("{MINIMAL}coarse_time_steps = 20\n{extra}\n");
+            toml::from_str::<Config>(&text).unwrap().check()
+        };
+        for extra in ["", "al_iterations = 3\ncoarse_al_iterations = 3"] {
+            assert!(
+                with(extra).unwrap_err().contains("coarse_al_iterations"),
+                "{extra}"
+            );
+        }
+        with("al_iterations = 3").unwrap();
+        with("al_iterations = 3\ncoarse_al_iterations = 1").unwrap();
     }
 }

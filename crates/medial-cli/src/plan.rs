@@ -154,10 +154,6 @@ impl FitPlan {
                 ]
             }
         };
-        let mut stages = stages;
-        for stage in stages.iter_mut().filter(|s| s.al_iterations > 1) {
-            stage.coarse_time_steps = Some(a.coarse_time_steps);
-        }
         let mut config = self.config_of(template, stages);
         config.flow.time_steps = a.time_steps;
         config.flow.sigma = (a.sigma_factor * self.sigma * 100.0).round() / 100.0;
@@ -185,6 +181,7 @@ impl FitPlan {
                 al_iterations: DICE_AL_ITERATIONS,
                 max_iterations: self.dice_iterations,
                 first: None,
+                coarse: 0,
             },
         );
         dice.image = Some(image);
@@ -201,6 +198,7 @@ impl FitPlan {
                 al_iterations: BOUNDARY_AL_ITERATIONS,
                 max_iterations: self.boundary_iterations,
                 first: None,
+                coarse: 0,
             },
         );
         boundary.target = Some(target);
@@ -241,6 +239,8 @@ struct Schedule {
     /// A longer first AL iteration that goes on while it makes progress (none:
     /// `max_iterations`, no progress rule).
     first: Option<FirstIteration>,
+    /// The first AL iterations in [`Automatic::coarse_time_steps`] steps (0: none).
+    coarse: usize,
 }
 
 /// The budget of the first AL iteration and the progress rule of a stage: an AL iteration
@@ -260,26 +260,30 @@ struct FirstIteration {
 struct Automatic {
     /// Time steps N.
     time_steps: usize,
-    /// `coarse_time_steps` of every stage of more than one AL iteration: the AL iterations
-    /// before the last run in 5 steps while their step strain stays below 0.5 (see
-    /// `medial_core::fit::augmented_lagrangian`). Measured against N = 10 throughout (the
-    /// resolved configs of this schedule, evaluations, figures; whole-process seconds in the
-    /// README):
-    /// - images (voxel Dice, max angle, max mismatch): t001-bent 427 → 363, 0.988, 0.012°,
-    ///   0.015 % → 0.989, 0.028°, 0.027 %; hard 508 → 461, 0.987, 0.15°, 0.09 % → 0.989,
-    ///   0.07°, 0.08 %; toy 296 → 412, 0.984, 0.05°, 0.014 % → 0.984, 0.02°, 0.007 % (no longer
-    ///   settled after 4 AL iterations: the last one runs in 10 steps); cup 278 → 344, 0.981,
-    ///   0.13°, 0.011 % → 0.981, 0.08°, 0.014 %; the anterior mitral leaflet strained past the
-    ///   limit at the 10th iteration and ran in 10 steps from its start: the same bits, 13
-    ///   evaluations more;
-    /// - points (mean distance): t001-bent 779 → 777, 0.016 → 0.015 mm; hard 766 → 760, 0.158
-    ///   → 0.157 mm; toy 418 → 360, 0.192 mm both;
-    /// - surfaces (the second varifold stage; mean distance): toy 829 → 878, 0.090 → 0.101
-    ///   mm; cup 646 → 621, 0.216 → 0.217 mm; t001-bent 852 → 901, 0.039 → 0.035 mm; hard 897 →
-    ///   918, 0.056 → 0.055 mm; the placenta 878 → 878, 0.289 → 0.241 mm.
+    /// `coarse_time_steps` of the stages whose [`Schedule::coarse`] is not 0: their first AL
+    /// iterations run in 5 steps while the flow strains space by at most 0.5 per step (see
+    /// `medial_core::fit::CoarseTime`). Measured against N = 10 throughout on the resolved
+    /// configs of this schedule (evaluations and figures; whole-process times in the README):
+    /// - images (voxel Dice, max angle, max mismatch), 3 of the 5 AL iterations coarse:
+    ///   t001-bent 427 → 384, 0.988, 0.012°, 0.015 % → 0.989, 0.013°, 0.009 %; hard 508 → 475,
+    ///   0.987, 0.15°, 0.09 % → 0.989, 0.07°, 0.07 %; toy 296 → 316, 0.984, 0.05°, 0.014 % →
+    ///   0.984, 0.09°, 0.02 %; cup 278 → 267, 0.981, 0.13°, 0.011 % → 0.981, 0.18°, 0.04 %; all
+    ///   four settled. The anterior mitral leaflet strains space past the limit by its 10th
+    ///   iteration and runs in 10 steps from its start: the same bits, 13 evaluations more.
+    ///   All but the last coarse (4 of 5): t001-bent 363, hard 461 evaluations, but the toy and
+    ///   the cup no longer settle (412, 344: their last AL iteration, in 10 steps, runs to its
+    ///   budget).
+    /// - points (mean distance), the first of 3 coarse: t001-bent 779 → 736, 0.016 → 0.015 mm;
+    ///   hard 766 → 805, 0.158 → 0.157 mm, 0.034° → 0.037°; toy 418 → 378, 0.192 mm both. Two
+    ///   of 3: 777, 760, 360 evaluations, but the hard case ends at 0.07°, 0.12 % and on its
+    ///   budget.
+    /// - surfaces: none. The first of the second stage's two AL iterations coarse: toy 829 →
+    ///   878, 0.090 → 0.101 mm; cup 646 → 621, 0.216 → 0.217 mm; t001-bent 852 → 901, 0.039 →
+    ///   0.035 mm; hard 897 → 918, 0.056 → 0.055 mm; the placenta 878 → 878, 0.289 → 0.241 mm,
+    ///   but t001-bent, hard and the placenta then end on their budgets.
     ///
-    /// Coarse only in the first AL iteration, then 10 steps, was measured too: evaluations in
-    /// between, the constraints looser (t001-bent 0.042°, the leaflet 0.67° and 0.96 %).
+    /// Coarse in every AL iteration but a last one in 10 steps started from the coarse first
+    /// one's end was measured too: the leaflet at 0.67°, 0.96 % (0.28°, 0.23 % in 10 steps).
     coarse_time_steps: usize,
     /// The kernel width, a fraction of the configs' [`Geometry::sigma`].
     sigma_factor: f64,
@@ -341,18 +345,21 @@ const AUTOMATIC: Automatic = Automatic {
             window: 40,
             decrease: 0.01,
         }),
+        coarse: 3,
     },
     points: Schedule {
         mu: 200.0,
         al_iterations: 3,
         max_iterations: 200,
         first: Some(FIRST_PROGRESS),
+        coarse: 1,
     },
     surface: Schedule {
         mu: 200.0,
         al_iterations: 1,
         max_iterations: 400,
         first: Some(FIRST_PROGRESS),
+        coarse: 0,
     },
     surface_fine: Schedule {
         mu: 2000.0,
@@ -362,6 +369,7 @@ const AUTOMATIC: Automatic = Automatic {
             budget: 300,
             ..FIRST_PROGRESS
         }),
+        coarse: 0,
     },
 };
 
@@ -455,6 +463,10 @@ fn constrained(name: &str, attachment: AttachmentKind, schedule: Schedule) -> St
     stage.mu_factor = 10.0;
     stage.al_iterations = schedule.al_iterations;
     stage.max_iterations = schedule.max_iterations;
+    if schedule.coarse > 0 {
+        stage.coarse_time_steps = Some(AUTOMATIC.coarse_time_steps);
+        stage.coarse_al_iterations = Some(schedule.coarse);
+    }
     if let Some(first) = schedule.first {
         stage.first_iterations = Some(first.budget);
         stage.progress_window = first.window;

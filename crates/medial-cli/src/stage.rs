@@ -13,7 +13,7 @@ use medial_core::attachment::dice::{DiceAttachment, DiceParams};
 use medial_core::attachment::ssd::Ssd;
 use medial_core::attachment::varifold::{Kind, Varifold, VarifoldParams, DEFAULT_NORMAL_WIDTH};
 use medial_core::attachment::Attachment;
-use medial_core::fit::augmented_lagrangian::{AlSchedule, MuUpdate, Settle};
+use medial_core::fit::augmented_lagrangian::{AlSchedule, CoarseTime, MuUpdate, Settle};
 use medial_core::fit::objective::Evaluation;
 use medial_core::fit::optimize::{LbfgsOptions, ProgressRule};
 use medial_core::flow::{Flow, FlowParams};
@@ -157,7 +157,13 @@ pub fn prepare(stage: &StageConfig, model: &Model) -> Result<Prepared, CliError>
                 max_abs_constraint,
                 data_change: stage.settle_data_change,
             }),
-            coarse_time_steps: stage.coarse_time_steps,
+            coarse: stage
+                .coarse_time_steps
+                .zip(stage.coarse_al_iterations())
+                .map(|(time_steps, al_iterations)| CoarseTime {
+                    time_steps,
+                    al_iterations,
+                }),
         },
         lbfgs: LbfgsOptions {
             max_iterations: stage.max_iterations,

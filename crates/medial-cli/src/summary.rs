@@ -91,6 +91,11 @@ pub struct StageSummary {
     pub settled: bool,
     /// Restarts of L-BFGS from a sound iterate after an unsound one.
     pub restarts: usize,
+    /// AL iterations run in `coarse_time_steps` time steps.
+    pub coarse_al_iterations: usize,
+    /// L-BFGS iterations of a coarse minimisation dropped because its flow strained space
+    /// past 0.5 (it ran again in the flow's own steps).
+    pub strained_iterations: usize,
     /// Constrained stages: whether the final max spoke–normal angle and max spoke mismatch are
     /// within the stage's `tolerance_deg` and `tolerance_pct` (for the last stage: at every
     /// time point of the fitted flow).

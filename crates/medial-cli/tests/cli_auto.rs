@@ -54,6 +54,33 @@ fn an_automatic_fit_to_a_segmentation_is_medial_and_its_config_reruns_to_the_sam
     assert!(stage["al_iterations"].as_u64().unwrap() < 5, "{stage}");
     assert!(f(&last["max_abs_constraint"]) <= 1e-3, "{last}");
     assert_eq!(summary["status"], "converged");
+    // Coarse to fine in time: the first three AL iterations in 5 steps, the rest in 10, as
+    // log.csv's time_steps column shows row by row.
+    assert_eq!(stage["coarse_al_iterations"], 3, "{stage}");
+    assert_eq!(stage["strained_iterations"], 0, "{stage}");
+    let log = std::fs::read_to_string(out.join("log.csv")).unwrap();
+    let steps: Vec<(u64, u64)> = log
+        .lines()
+        .skip(1)
+        .map(|row| {
+            let cells: Vec<&str> = row.split(',').collect();
+            (
+                cells[1].parse().unwrap(),
+                cells.last().unwrap().parse().unwrap(),
+            )
+        })
+        .collect();
+    assert!(log.lines().next().unwrap().ends_with(",time_steps"));
+    assert!(
+        steps
+            .iter()
+            .all(|&(al, n)| n == if al < 3 { 5 } else { 10 }),
+        "{steps:?}"
+    );
+    assert!(
+        steps.iter().any(|&(al, _)| al >= 3),
+        "an AL iteration in 10 steps"
+    );
     assert!(f(&last["voxel_dice"]) >= 0.97, "{last}");
     assert!(f(&last["max_spoke_normal_deg"]) <= 0.5, "{last}");
     assert!(f(&last["max_spoke_mismatch_pct"]) <= 0.5, "{last}");

@@ -894,6 +894,8 @@ fn stage_summary(
         converged: outcome.converged(),
         settled: outcome.settled,
         restarts: outcome.restarts,
+        coarse_al_iterations: outcome.coarse_al_iterations,
+        strained_iterations: outcome.strained_iterations,
         constraints_met,
         unsound: outcome.unsound.as_ref().map(|u| {
             format!(

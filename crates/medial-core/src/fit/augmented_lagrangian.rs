@@ -47,13 +47,25 @@ pub struct AlSchedule {
     /// Ends the schedule once an AL iteration has settled, before its last (none: every AL
     /// iteration runs); a last AL iteration that settles marks the stage settled too.
     pub settle: Option<Settle>,
-    /// Coarse to fine in time: the AL iterations before the last (or before the one after an
-    /// AL iteration that settled) run the flow in this many time steps, which must divide the
-    /// stage's `N`; then the momenta are carried to the `N` steps ([`retime_momenta`]) and the
-    /// multipliers with them ([`retime_multipliers`]), and the schedule goes on in `N` steps.
-    /// Each evaluation of a coarse AL iteration costs about `coarse/N` of a fine one. None:
-    /// every AL iteration in `N` steps.
-    pub coarse_time_steps: Option<usize>,
+    /// Coarse to fine in time (none: every AL iteration in the stage's `N` steps).
+    pub coarse: Option<CoarseTime>,
+}
+
+/// Coarse to fine in time: the first [`CoarseTime::al_iterations`] AL iterations (fewer if
+/// one settles before) run the flow in [`CoarseTime::time_steps`] steps, a divisor of the
+/// stage's `N`; then the momenta are carried to the `N` steps ([`retime_momenta`]), the
+/// multipliers with them ([`retime_multipliers`]), and the schedule goes on in `N` steps. The
+/// kernel sums and the constraints of a coarse evaluation cost `coarse/N` of a fine one (the
+/// attachment the same). A coarse minimisation whose flow strains space past
+/// [`COARSE_STRAIN_LIMIT`] (checked every [`STRAIN_CHECK_INTERVAL`] iterations) is dropped and
+/// its AL iteration runs in `N` steps from where it began.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CoarseTime {
+    /// Time steps of the coarse AL iterations.
+    pub time_steps: usize,
+    /// AL iterations in coarse steps, at least 1 and fewer than the schedule's: the last runs
+    /// in the stage's steps.
+    pub al_iterations: usize,
 }
 
 /// When an AL schedule has settled: at the end of an AL iteration after the first,
@@ -87,7 +99,7 @@ impl Default for AlSchedule {
             mu_update: MuUpdate::Always,
             first_iterations: None,
             settle: None,
-            coarse_time_steps: None,
+            coarse: None,
         }
     }
 }
@@ -96,13 +108,23 @@ impl AlSchedule {
     /// The flow of the coarse AL iterations of a stage in `fine`, when there are any: a
     /// coarse step count that divides `N`, below it, and at least two AL iterations.
     fn coarse_flow(&self, fine: &Flow) -> Result<Option<Flow>> {
-        let Some(steps) = self.coarse_time_steps.filter(|_| self.iterations > 1) else {
+        let Some(CoarseTime {
+            time_steps: steps,
+            al_iterations,
+        }) = self.coarse
+        else {
             return Ok(None);
         };
         let n = fine.time_steps();
         if steps == 0 || steps >= n || n % steps != 0 {
             return Err(Error::InvalidParameter(format!(
-                "coarse_time_steps must divide the flow's {n} time steps and be below them, got {steps}"
+                "coarse time steps must divide the flow's {n} time steps and be below them, got {steps}"
+            )));
+        }
+        if al_iterations == 0 || al_iterations >= self.iterations {
+            return Err(Error::InvalidParameter(format!(
+                "coarse AL iterations must be at least 1 and below the schedule's {}, got {al_iterations}",
+                self.iterations
             )));
         }
         fine.with_time_steps(steps).map(Some)
@@ -155,7 +177,7 @@ pub struct Progress<'r> {
     /// `μ` of this AL iteration (0 without constraints).
     pub mu: f64,
     /// Time steps of the flow of this minimisation: the stage's `N`, or its coarse steps
-    /// ([`AlSchedule::coarse_time_steps`]).
+    /// ([`AlSchedule::coarse`]).
     pub time_steps: usize,
     /// The L-BFGS iteration.
     pub report: &'r IterationReport<'r>,
@@ -201,6 +223,13 @@ pub struct StageOutcome {
     /// Whether the schedule ended early because it settled ([`AlSchedule::settle`]).
     #[serde(default)]
     pub settled: bool,
+    /// AL iterations run in coarse steps ([`AlSchedule::coarse`]).
+    #[serde(default)]
+    pub coarse_al_iterations: usize,
+    /// L-BFGS iterations of a coarse minimisation dropped because its flow strained space past
+    /// the limit (it then ran again in the stage's steps); 0 if none was.
+    #[serde(default)]
+    pub strained_iterations: usize,
 }
 
 impl StageOutcome {
@@ -289,6 +318,8 @@ impl StageCheckpoint {
             restarts: self.done.restarts + m.restarts(),
             unsound: None,
             settled: false,
+            coarse_al_iterations: self.done.coarse_al_iterations,
+            strained_iterations: self.done.strained_iterations,
         }
     }
 
@@ -299,7 +330,7 @@ impl StageCheckpoint {
     }
 }
 
-/// The coarse AL iterations of a stage ([`AlSchedule::coarse_time_steps`]): their step count
+/// The coarse AL iterations of a stage in progress ([`AlSchedule::coarse`]): their step count
 /// and the stage's.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 struct CoarsePhase {
@@ -380,6 +411,8 @@ impl Schedule {
                 restarts: 0,
                 unsound: None,
                 settled: false,
+                coarse_al_iterations: 0,
+                strained_iterations: 0,
             },
         }
     }
@@ -430,6 +463,7 @@ impl Schedule {
         self.outcome.iterations += m.iterations();
         self.outcome.evaluations += m.evaluations();
         self.outcome.restarts += m.restarts();
+        self.outcome.strained_iterations += m.iterations();
         let l = lambda_count(stage);
         self.lambda = retime_multipliers(&self.lambda, l, phase.steps, phase.fine_steps);
         std::mem::take(&mut self.coarse_start)
@@ -546,6 +580,7 @@ pub fn run_stage(
         outcome.iterations += min.iterations;
         outcome.evaluations += min.evaluations;
         outcome.al_iterations += 1;
+        outcome.coarse_al_iterations += usize::from(at.coarse.is_some());
         outcome.restarts += min.restarts;
         outcome.evaluation = min.evaluation.clone();
         outcome.mu = mu;
@@ -592,7 +627,7 @@ pub fn run_stage(
         let mut momenta = min.momenta;
         if let Some(phase) = at.coarse {
             let (fine, fine_lambda) = phase.refined(&momenta, &at.lambda, lambda_count(stage));
-            if coarse_settled || at.al_iteration + 1 == al_iterations {
+            if coarse_settled || Some(at.al_iteration) == schedule.coarse.map(|c| c.al_iterations) {
                 (momenta, at.lambda, at.coarse) = (fine, fine_lambda, None);
             } else {
                 at.coarse_start = fine;
@@ -603,7 +638,7 @@ pub fn run_stage(
 }
 
 /// How often the coarse flow's step strain is checked, L-BFGS iterations.
-const STRAIN_CHECK_INTERVAL: usize = 10;
+pub const STRAIN_CHECK_INTERVAL: usize = 10;
 
 /// The largest step strain `dt · max_i ‖∇v^n(q^n_i)‖` ([`Flow::step_strains`]) of the coarse
 /// flow at which its AL iterations go on. Past it a coarse step is far from the `N/coarse`
@@ -611,13 +646,15 @@ const STRAIN_CHECK_INTERVAL: usize = 10;
 /// `strain/2` of the step. The anterior mitral leaflet, at σ = 0.37 mm, passes 0.5 at N = 5
 /// within 10 iterations (1.01 at the end), and carried to N = 10 then violates its constraints
 /// at the new time points by 13°; the automatic t001-sized fits stay at 0.17–0.47.
-const COARSE_STRAIN_LIMIT: f64 = 0.5;
+pub const COARSE_STRAIN_LIMIT: f64 = 0.5;
 
 /// Whether the flow under `u` from `q0` strains space past [`COARSE_STRAIN_LIMIT`] in a step.
 fn too_strained(flow: &Flow, q0: &[Vec3], u: &[f64]) -> bool {
     let strains = flow.shoot(q0, u).and_then(|t| flow.step_strains(&t, u));
     // A NaN strain counts as past the limit.
-    strains.map_or(true, |s| s.iter().any(|x| x.is_nan() || *x > COARSE_STRAIN_LIMIT))
+    strains.map_or(true, |s| {
+        s.iter().any(|x| x.is_nan() || *x > COARSE_STRAIN_LIMIT)
+    })
 }
 
 /// The number of constraints of `stage` (0 without).

@@ -16,8 +16,8 @@ pub use align::{
     affine_between, align_affine, align_similarity, anisotropy, similarity_between, Alignment,
 };
 pub use augmented_lagrangian::{
-    run_stage, AlSchedule, MuUpdate, Progress, Stage, StageCheckpoint, StageOutcome, StageRun,
-    StageStart, UnsoundStop,
+    run_stage, AlSchedule, CoarseTime, MuUpdate, Progress, Stage, StageCheckpoint, StageOutcome,
+    StageRun, StageStart, UnsoundStop,
 };
 pub use guard::{Guard, Unsound};
 pub use objective::{ConstraintSet, Evaluation, Objective, Penalty};

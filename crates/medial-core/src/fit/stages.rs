@@ -204,7 +204,7 @@ fn check_fits(c: &Checkpoint, stages: usize, len: usize) -> Result<()> {
 mod tests {
     use super::*;
     use crate::attachment::ssd::Ssd;
-    use crate::fit::augmented_lagrangian::Settle;
+    use crate::fit::augmented_lagrangian::{CoarseTime, Settle};
     use crate::fit::guard::Guard;
     use crate::fit::{ConstraintSet, ProgressRule, StopReason};
     use crate::flow::{Flow, FlowParams};
@@ -256,10 +256,13 @@ mod tests {
         }
 
         /// [`Case::plan`] with the constrained stage coarse to fine in time, in half the steps
-        /// before its last AL iteration.
+        /// in its first two AL iterations (of three).
         fn coarse_plan(&self) -> Vec<PlannedStage<'_>> {
             let mut plan = self.plan();
-            plan[1].schedule.coarse_time_steps = Some(self.flow.time_steps() / 2);
+            plan[1].schedule.coarse = Some(CoarseTime {
+                time_steps: self.flow.time_steps() / 2,
+                al_iterations: 2,
+            });
             plan
         }
 
@@ -610,6 +613,7 @@ mod tests {
         assert_eq!(steps_per_al_iteration(&fine_rows), [8, 8, 8]);
         assert_eq!(steps_per_al_iteration(&coarse_rows), [4, 4, 8]);
         let (f, c) = (&fine[1], &coarse[1]);
+        assert_eq!((c.coarse_al_iterations, c.strained_iterations), (2, 0));
         assert_eq!(c.momenta.len(), f.momenta.len());
         assert_eq!(c.lambda.len(), f.lambda.len());
         // The same stage (after the same first stage), ended in the same steps, no worse for
@@ -645,6 +649,7 @@ mod tests {
         assert_eq!(to_bits(&c.lambda), to_bits(&f.lambda));
         assert_eq!(c.evaluation, f.evaluation);
         assert_eq!(c.iterations, f.iterations + 10);
+        assert_eq!((c.coarse_al_iterations, c.strained_iterations), (0, 10));
         assert!(c.evaluations > f.evaluations);
         assert_eq!(c.al_iterations, f.al_iterations);
     }
