@@ -45,7 +45,8 @@ pub enum Target {
     /// Points in correspondence with the template's boundary points.
     Points(PathBuf),
     /// A surface without correspondence: its file, and the varifold kernel widths (mm) of the
-    /// automatic fit's two stages (see [`varifold_widths`]).
+    /// automatic fit's first two stages (see [`varifold_widths`]; the third's is
+    /// [`finest_width`]).
     Surface {
         /// The file.
         path: PathBuf,
@@ -108,12 +109,14 @@ impl FitPlan {
     /// - corresponding points: SSD;
     /// - a surface: varifold, one AL iteration at μ = 200 of up to 400 L-BFGS iterations while
     ///   they make progress, then a second varifold stage at a narrower kernel
-    ///   ([`varifold_widths`]) at μ = 2000 and 20000 (up to 300, then 150).
+    ///   ([`varifold_widths`]) at μ = 2000 (up to 300), then a third at about the flow's σ
+    ///   ([`finest_width`]) at μ = 20000 (up to 200).
     ///
     /// The kernel is truncated as [`kernel_tolerance`] decides for the template's landmarks
     /// `landmarks`.
     pub fn automatic(&self, template: PathBuf, target: &Target, landmarks: &[Vec3]) -> Config {
         let a = &AUTOMATIC;
+        let sigma = (a.sigma_factor * self.sigma * 100.0).round() / 100.0;
         let stages = match target {
             Target::Image {
                 path,
@@ -151,12 +154,17 @@ impl FitPlan {
                 vec![
                     varifold("surface", a.surface, *width),
                     varifold("surface-fine", a.surface_fine, *fine_width),
+                    varifold(
+                        "surface-finest",
+                        a.surface_finest,
+                        finest_width(*fine_width, sigma),
+                    ),
                 ]
             }
         };
         let mut config = self.config_of(template, stages);
         config.flow.time_steps = a.time_steps;
-        config.flow.sigma = (a.sigma_factor * self.sigma * 100.0).round() / 100.0;
+        config.flow.sigma = sigma;
         config.flow.kernel_tolerance = kernel_tolerance(config.flow.sigma, landmarks);
         config
     }
@@ -307,13 +315,26 @@ struct Automatic {
     /// 0.056 against 0.062 mm, 0.289 against 0.314 mm (the previous schedule: 0.055 mm in 1,600
     /// and 0.247 mm in 1,550 evaluations; this one 897 and 878).
     surface: Schedule,
-    /// The second varifold stage, at the narrower kernel: μ = 2000, 20000, the first AL
-    /// iteration up to 300 iterations, the second up to 150, both under the progress rule.
-    /// The width (a quarter of the first stage's) was chosen with the previous schedule and an
+    /// The second varifold stage, at the narrower kernel: μ = 2000, one AL iteration of up to
+    /// 300 iterations under the progress rule (until this release a second, μ = 20000 and up
+    /// to 150, at the same width, now the third stage's). The width (a quarter of the first stage's) was chosen with the previous schedule and an
     /// earlier flow kernel on the placenta (cmrep's sheet inflated, against its deformed
     /// template): after the first stage's 0.735 mm to the surface, a quarter of the width ended
     /// at 0.544 mm, half of it at 0.635 mm (2 × 300 from μ = 2000 each, 620 evaluations).
     surface_fine: Schedule,
+    /// The third varifold stage, at about the flow's σ ([`finest_width`]): μ = 20000, one AL
+    /// iteration of up to 200 iterations while the last 40 lower the objective by at least
+    /// 0.1 % (at the 0.3 % of the others it stopped after about 43 evaluations: at a narrow
+    /// width the data term carries a large constant part, so its relative decrease looks
+    /// small). Measured on the toy, the cup, t001-bent, hard and the placenta (evaluations,
+    /// mean distance to the surface), against the second stage's second AL iteration at its
+    /// own width: 829 → 929, 0.090 → 0.090 mm; 646 → 784, 0.216 → 0.146 mm; 852 → 837, 0.039 →
+    /// 0.038 mm; 897 → 951, 0.056 → 0.055 mm; 878 → 929, 0.289 → 0.287 mm. 150 iterations
+    /// without the progress rule: the cup at 0.185 mm; the second stage kept as it was and the
+    /// third after it: 752–1,058 evaluations. A third width below σ takes the toy farther
+    /// (w₂/2 = 1.0 mm: 0.198 mm; 0.85 σ: 0.102 mm), above it the cup (1.15 σ: 0.190 mm); σ
+    /// itself as the second width: the cup 0.174 mm, the toy 0.118 mm.
+    surface_finest: Schedule,
 }
 
 /// Measured on cmrep's t001 under a −35° bend, a 25° twist and an unequal scaling (1.15, 0.9,
@@ -363,11 +384,22 @@ const AUTOMATIC: Automatic = Automatic {
     },
     surface_fine: Schedule {
         mu: 2000.0,
-        al_iterations: 2,
-        max_iterations: 150,
+        al_iterations: 1,
+        max_iterations: 300,
         first: Some(FirstIteration {
             budget: 300,
             ..FIRST_PROGRESS
+        }),
+        coarse: 0,
+    },
+    surface_finest: Schedule {
+        mu: 20000.0,
+        al_iterations: 1,
+        max_iterations: 200,
+        first: Some(FirstIteration {
+            budget: 200,
+            window: 40,
+            decrease: 0.001,
         }),
         coarse: 0,
     },
@@ -442,6 +474,16 @@ pub fn varifold_widths(
     let width = default_width(target)?;
     let edge = mean_edge(target).max(mean_edge(boundary));
     Ok((width, (FINE_WIDTH_FRACTION * width).max(0.5 * edge)))
+}
+
+/// The third varifold stage's kernel width (mm) after a second at `fine` in a flow of kernel
+/// width `sigma`: σ, at least half the second's and at most the second's (see
+/// [`Automatic::surface_finest`]). The flow cannot follow a varifold much narrower than its
+/// own kernel without pulling its boundary points apart; σ separates the cup, which wants
+/// narrower, from the toy, which wants wider (their widths against their mean edges are
+/// alike).
+pub fn finest_width(fine: f64, sigma: f64) -> f64 {
+    sigma.max(0.5 * fine).min(fine)
 }
 
 /// The largest `|C|` (relative units: about 0.06° and 0.1 %) at which an automatic stage's AL
@@ -631,5 +673,15 @@ mod tests {
         // A width too wide for any pair to be far, and one that is not a width at all.
         assert_eq!(kernel_tolerance(100.0, &line(100)), 0.0);
         assert_eq!(kernel_tolerance(f64::NAN, &line(100)), 0.0);
+    }
+
+    #[test]
+    fn the_finest_varifold_width_is_sigma_within_half_to_all_of_the_second() {
+        // The cup's and the toy's (second width, σ): σ within the bounds.
+        assert_eq!(finest_width(3.155, 1.74), 1.74);
+        assert_eq!(finest_width(2.0, 1.5), 1.5);
+        // A σ wider than the second width keeps it; a much narrower one halves it.
+        assert_eq!(finest_width(1.0, 2.0), 1.0);
+        assert_eq!(finest_width(4.0, 1.0), 2.0);
     }
 }

@@ -266,3 +266,56 @@ fn first_logged(out: &Path, name: &str) -> Value {
     let column = header.iter().position(|h| *h == name).unwrap();
     Value::from(row[column].parse::<f64>().unwrap())
 }
+
+#[test]
+fn an_automatic_fit_to_a_surface_narrows_its_varifold_in_three_stages() {
+    // The toy against its target boundary as a surface (no correspondence used): widths a
+    // tenth of the diagonal, a quarter of that, then the flow's σ.
+    let dir = tempfile::tempdir().unwrap();
+    let toy = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/toy");
+    let out = dir.path().join("surface");
+    let (template, surface) = (toy.join("template.vtk"), toy.join("target_boundary.vtk"));
+    let args = [
+        "fit",
+        "--template",
+        s(&template),
+        "--surface",
+        s(&surface),
+        "--out",
+        s(&out),
+        "-q",
+    ];
+    let o = medial(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let summary = read_summary(&out);
+    let stages = summary["stages"].as_array().unwrap();
+    let names: Vec<&str> = stages
+        .iter()
+        .map(|st| st["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["surface", "surface-fine", "surface-finest"]);
+    let config: toml::Value =
+        toml::from_str(&std::fs::read_to_string(out.join("config.toml")).unwrap()).unwrap();
+    let widths: Vec<f64> = config["stage"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|st| st["varifold_width"].as_float().unwrap())
+        .collect();
+    let sigma = config["flow"]["sigma"].as_float().unwrap();
+    assert!(widths[0] > widths[1] && widths[1] > widths[2], "{widths:?}");
+    assert!((widths[1] / widths[0] - 0.25).abs() < 1e-9 || widths[1] > 0.25 * widths[0]);
+    assert_eq!(
+        widths[2],
+        sigma.max(0.5 * widths[1]).min(widths[1]),
+        "{widths:?} σ {sigma}"
+    );
+    // Each stage brings the boundary closer to the surface, and the fit stays medial.
+    let distance: Vec<f64> = stages.iter().map(|st| f(&st["surface_distance"])).collect();
+    assert!(distance.windows(2).all(|d| d[1] <= d[0]), "{distance:?}");
+    let last = &summary["final"];
+    println!("automatic toy surface fit: {distance:?}, {last:#}");
+    assert!(f(&last["surface_distance"]) < 0.15, "{last}");
+    assert!(f(&last["max_spoke_normal_deg"]) <= 0.5, "{last}");
+    assert!(f(&last["max_spoke_mismatch_pct"]) <= 0.5, "{last}");
+}

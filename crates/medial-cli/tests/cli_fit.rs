@@ -80,7 +80,7 @@ fn fit_writes_every_output_and_matches_an_affine_target() {
 
     let log = std::fs::read_to_string(out.join("log.csv")).unwrap();
     let header = log.lines().next().unwrap();
-    assert_eq!(header, "stage,al_iteration,iteration,evaluations,mu,total,kinetic,data,penalty,max_abs_constraint,max_spoke_normal_deg,max_spoke_mismatch_pct,grad_norm,seconds,dice");
+    assert_eq!(header, "stage,al_iteration,iteration,evaluations,mu,total,kinetic,data,penalty,max_abs_constraint,max_spoke_normal_deg,max_spoke_mismatch_pct,grad_norm,seconds,dice,time_steps");
     assert!(log.lines().count() > 3);
 
     let momenta = read_npy(&out.join("momenta.npy")).unwrap();
