@@ -482,7 +482,7 @@ pub fn varifold_widths(
 /// own kernel without pulling its boundary points apart; σ separates the cup, which wants
 /// narrower, from the toy, which wants wider (their widths against their mean edges are
 /// alike).
-pub fn finest_width(fine: f64, sigma: f64) -> f64 {
+fn finest_width(fine: f64, sigma: f64) -> f64 {
     sigma.max(0.5 * fine).min(fine)
 }
 

@@ -164,7 +164,7 @@ pub struct Summary {
     pub over_time: Option<OverTime>,
     /// The strain of each step of the fitted flow, `dt · max_i ‖∇v^n(q^n_i)‖_F`, `n = 0 … N−1`
     /// (`medial_core::flow::Flow::step_strains`): a step is one-to-one while its strain is
-    /// below 1, and a fit warns past `STRAIN_LIMIT` (0.5).
+    /// below 1, and a fit warns past `medial_core::flow::STRAIN_LIMIT` (0.5).
     pub step_strains: Vec<f64>,
     /// Each stage.
     pub stages: Vec<StageSummary>,

@@ -304,7 +304,8 @@ fn an_automatic_fit_to_a_surface_narrows_its_varifold_in_three_stages() {
         .collect();
     let sigma = config["flow"]["sigma"].as_float().unwrap();
     assert!(widths[0] > widths[1] && widths[1] > widths[2], "{widths:?}");
-    assert!((widths[1] / widths[0] - 0.25).abs() < 1e-9 || widths[1] > 0.25 * widths[0]);
+    // A quarter of the first width, or more where that is under half a mean edge.
+    assert!(widths[1] >= 0.25 * widths[0] * (1.0 - 1e-12), "{widths:?}");
     assert_eq!(
         widths[2],
         sigma.max(0.5 * widths[1]).min(widths[1]),

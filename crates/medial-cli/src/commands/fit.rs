@@ -20,7 +20,7 @@ use medial_core::fit::{
     similarity_between, Checkpoint, ConstraintSet, FitEvent, FitRun, Guard, PlannedStage, Stage,
     StageOutcome,
 };
-use medial_core::flow::{Flow, Trajectory};
+use medial_core::flow::{Flow, Trajectory, STRAIN_LIMIT};
 use medial_core::image::rasterize::{grid_around, rasterize};
 use medial_core::image::Volume;
 use medial_core::mesh::topology::{check_closed_oriented_manifold, check_outward};
@@ -818,16 +818,11 @@ impl Fit<'_> {
     }
 }
 
-/// The step strain (`dt·|∇v|`, see [`Flow::step_strains`]) from which a fit warns: a step is
-/// one-to-one while it is below 1 (a sufficient condition, checked at the landmarks); half
-/// of that leaves a margin for the field between them.
-pub const STRAIN_LIMIT: f64 = 0.5;
-
 /// A warning when a step of the fitted flow strains space past [`STRAIN_LIMIT`].
 fn warn_of_strain(strains: &[f64]) {
     let Some((n, &worst)) = (strains.iter().enumerate())
         .max_by(|a, b| a.1.total_cmp(b.1))
-        .filter(|(_, s)| s.is_nan() || **s >= STRAIN_LIMIT)
+        .filter(|(_, s)| s.is_nan() || **s > STRAIN_LIMIT)
     else {
         return;
     };

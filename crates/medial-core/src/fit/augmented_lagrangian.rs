@@ -13,7 +13,7 @@ use crate::fit::optimize::{
     minimize, IterationReport, LbfgsOptions, Minimization, MinimizerCheckpoint, Minimum, Start,
     StopReason,
 };
-use crate::flow::{retime_momenta, Flow};
+use crate::flow::{retime_momenta, Flow, STRAIN_LIMIT};
 use crate::{Error, Result, Vec3};
 use serde::{Deserialize, Serialize};
 use std::cell::Cell;
@@ -57,7 +57,7 @@ pub struct AlSchedule {
 /// multipliers with them ([`retime_multipliers`]), and the schedule goes on in `N` steps. The
 /// kernel sums and the constraints of a coarse evaluation cost `coarse/N` of a fine one (the
 /// attachment the same). A coarse minimisation whose flow strains space past
-/// [`COARSE_STRAIN_LIMIT`] (checked every [`STRAIN_CHECK_INTERVAL`] iterations) is dropped and
+/// [`STRAIN_LIMIT`] (checked every [`STRAIN_CHECK_INTERVAL`] iterations) is dropped and
 /// its AL iteration runs in `N` steps from where it began.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct CoarseTime {
@@ -273,10 +273,6 @@ pub struct StageCheckpoint {
     /// Set while the schedule is in its coarse AL iterations (momenta and `λ` in coarse steps).
     #[serde(default)]
     coarse: Option<CoarsePhase>,
-    /// The momenta, in the stage's steps, from which the coarse minimisation in progress would
-    /// run again in those steps (empty in fine steps).
-    #[serde(default)]
-    coarse_start: Vec<f64>,
     /// The finished minimisations of the stage (its `momenta` are not used).
     done: StageOutcome,
     minimizer: MinimizerCheckpoint,
@@ -302,7 +298,7 @@ impl StageCheckpoint {
         let m = &self.minimizer;
         let mut stops = self.done.stops.clone();
         stops.push(StopReason::Paused);
-        let (momenta, lambda) = match self.coarse {
+        let (momenta, lambda) = match &self.coarse {
             Some(p) => p.refined(m.momenta(), &self.lambda, self.lambda.len() / p.steps),
             None => (m.momenta().to_vec(), self.lambda.clone()),
         };
@@ -326,16 +322,22 @@ impl StageCheckpoint {
     /// The number of momenta of the stage's flow (`N·k·3`, also while in coarse steps).
     pub fn momenta_len(&self) -> usize {
         let len = self.minimizer.momenta().len();
-        self.coarse.map_or(len, |p| len / p.steps * p.fine_steps)
+        self.coarse
+            .as_ref()
+            .map_or(len, |p| len / p.steps * p.fine_steps)
     }
 }
 
-/// The coarse AL iterations of a stage in progress ([`AlSchedule::coarse`]): their step count
-/// and the stage's.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+/// The coarse AL iterations of a stage in progress ([`AlSchedule::coarse`]): their step count,
+/// the stage's, and where the coarse minimisation in progress would run again in the stage's
+/// steps should its flow strain space too far.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 struct CoarsePhase {
     steps: usize,
     fine_steps: usize,
+    /// Momenta in the stage's steps: the stage's start, or the previous coarse AL iteration's
+    /// end.
+    restart: Vec<f64>,
 }
 
 impl CoarsePhase {
@@ -369,9 +371,6 @@ struct Schedule {
     al_iteration: usize,
     /// Set while in the coarse AL iterations.
     coarse: Option<CoarsePhase>,
-    /// The momenta, in the stage's steps, from which the coarse minimisation in progress would
-    /// run again in those steps: the stage's start, or the previous coarse AL iteration's end.
-    coarse_start: Vec<f64>,
     mu: f64,
     lambda: Vec<f64>,
     previous_violation: f64,
@@ -380,21 +379,35 @@ struct Schedule {
 }
 
 impl Schedule {
-    /// The start of the schedule: `λ = 0` and `μ = μ₀` with constraints, no `λ` and `μ = 0`
-    /// without; in the coarse steps of `coarse` when given.
-    fn new(stage: &Stage<'_>, schedule: &AlSchedule, coarse: Option<&Flow>) -> Self {
+    /// The start of the schedule from `momenta` (in the stage's steps): `λ = 0` and `μ = μ₀`
+    /// with constraints, no `λ` and `μ = 0` without; in the coarse steps of `coarse` when
+    /// given. Returns it with the first iterate (`momenta` in the first minimisation's steps).
+    fn new(
+        stage: &Stage<'_>,
+        schedule: &AlSchedule,
+        coarse: Option<&Flow>,
+        momenta: Vec<f64>,
+    ) -> Result<(Self, Vec<f64>)> {
         let flow = coarse.unwrap_or(stage.flow);
+        let (first, coarse) = match coarse {
+            Some(c) => {
+                let first = c.retimed_momenta(&momenta, stage.flow.time_steps())?;
+                let phase = CoarsePhase {
+                    steps: c.time_steps(),
+                    fine_steps: stage.flow.time_steps(),
+                    restart: momenta,
+                };
+                (first, Some(phase))
+            }
+            None => (momenta, None),
+        };
         let (mu, lambda) = match stage.constraints {
             Some(c) => (schedule.mu, vec![0.0; flow.time_steps() * c.len()]),
             None => (0.0, Vec::new()),
         };
-        Self {
+        let at = Self {
             al_iteration: 0,
-            coarse: coarse.map(|c| CoarsePhase {
-                steps: c.time_steps(),
-                fine_steps: stage.flow.time_steps(),
-            }),
-            coarse_start: Vec::new(),
+            coarse,
             mu,
             lambda,
             previous_violation: f64::INFINITY,
@@ -414,7 +427,8 @@ impl Schedule {
                 coarse_al_iterations: 0,
                 strained_iterations: 0,
             },
-        }
+        };
+        Ok((at, first))
     }
 
     /// The schedule of a paused stage, checked against the stage (whose coarse flow, if any,
@@ -425,9 +439,12 @@ impl Schedule {
         iterations: usize,
         coarse: Option<&Flow>,
     ) -> Result<Self> {
-        let steps = c.coarse.map_or(stage.flow.time_steps(), |p| p.steps);
+        let steps = c
+            .coarse
+            .as_ref()
+            .map_or(stage.flow.time_steps(), |p| p.steps);
         let lambda_len = stage.constraints.map_or(0, |k| steps * k.len());
-        let coarse_fits = c.coarse.map_or(true, |p| {
+        let coarse_fits = c.coarse.as_ref().map_or(true, |p| {
             coarse.is_some_and(|f| f.time_steps() == p.steps)
                 && p.fine_steps == stage.flow.time_steps()
         });
@@ -441,8 +458,7 @@ impl Schedule {
         }
         Ok(Self {
             al_iteration: c.al_iteration,
-            coarse: c.coarse,
-            coarse_start: c.coarse_start.clone(),
+            coarse: c.coarse.clone(),
             mu: c.mu,
             lambda: c.lambda.clone(),
             previous_violation: c.previous_violation,
@@ -466,7 +482,7 @@ impl Schedule {
         self.outcome.strained_iterations += m.iterations();
         let l = lambda_count(stage);
         self.lambda = retime_multipliers(&self.lambda, l, phase.steps, phase.fine_steps);
-        std::mem::take(&mut self.coarse_start)
+        phase.restart
     }
 
     /// The checkpoint of the schedule paused in the minimisation `minimizer`.
@@ -479,7 +495,6 @@ impl Schedule {
             previous_data: self.previous_data,
             guard_start,
             coarse: self.coarse,
-            coarse_start: self.coarse_start,
             done: self.outcome,
             minimizer,
         }
@@ -509,15 +524,8 @@ pub fn run_stage(
     };
     let (mut at, guard_start, mut minimizer_start) = match start {
         StageStart::Momenta(momenta) => {
-            let mut at = Schedule::new(stage, schedule, coarse.as_ref());
-            let start = match &coarse {
-                Some(c) => c.retimed_momenta(&momenta, stage.flow.time_steps())?,
-                None => momenta.clone(),
-            };
-            if coarse.is_some() {
-                at.coarse_start = momenta;
-            }
-            (at, None, Start::Momenta(start))
+            let (at, first) = Schedule::new(stage, schedule, coarse.as_ref(), momenta)?;
+            (at, None, Start::Momenta(first))
         }
         StageStart::Resume(c) => (
             Schedule::resumed(stage, &c, al_iterations, coarse.as_ref())?,
@@ -597,7 +605,7 @@ pub fn run_stage(
             || al_iteration + 1 == al_iterations
         {
             at.outcome.momenta = min.momenta;
-            if let Some(phase) = at.coarse {
+            if let Some(phase) = &at.coarse {
                 // An unsound stop in coarse steps: its last sound iterate in the stage's steps.
                 let (momenta, lambda) = (&at.outcome.momenta, &at.outcome.lambda);
                 (at.outcome.momenta, at.outcome.lambda) =
@@ -625,13 +633,17 @@ pub fn run_stage(
         }
         at.al_iteration += 1;
         let mut momenta = min.momenta;
-        if let Some(phase) = at.coarse {
+        let leave =
+            coarse_settled || Some(at.al_iteration) == schedule.coarse.map(|c| c.al_iterations);
+        if let Some(phase) = &mut at.coarse {
             let (fine, fine_lambda) = phase.refined(&momenta, &at.lambda, lambda_count(stage));
-            if coarse_settled || Some(at.al_iteration) == schedule.coarse.map(|c| c.al_iterations) {
-                (momenta, at.lambda, at.coarse) = (fine, fine_lambda, None);
-            } else {
-                at.coarse_start = fine;
+            match leave {
+                true => (momenta, at.lambda) = (fine, fine_lambda),
+                false => phase.restart = fine,
             }
+        }
+        if leave {
+            at.coarse = None;
         }
         minimizer_start = Start::Momenta(momenta);
     }
@@ -640,21 +652,16 @@ pub fn run_stage(
 /// How often the coarse flow's step strain is checked, L-BFGS iterations.
 pub const STRAIN_CHECK_INTERVAL: usize = 10;
 
-/// The largest step strain `dt · max_i ‖∇v^n(q^n_i)‖` ([`Flow::step_strains`]) of the coarse
-/// flow at which its AL iterations go on. Past it a coarse step is far from the `N/coarse`
-/// fine steps that replace it: they differ by about `dt²/2 · ∇v·v`, i.e. by a fraction
-/// `strain/2` of the step. The anterior mitral leaflet, at σ = 0.37 mm, passes 0.5 at N = 5
-/// within 10 iterations (1.01 at the end), and carried to N = 10 then violates its constraints
-/// at the new time points by 13°; the automatic t001-sized fits stay at 0.17–0.47.
-pub const COARSE_STRAIN_LIMIT: f64 = 0.5;
-
-/// Whether the flow under `u` from `q0` strains space past [`COARSE_STRAIN_LIMIT`] in a step.
+/// Whether the flow under `u` from `q0` strains space past [`STRAIN_LIMIT`] in a step, where
+/// coarse steps are left. Two fine steps of one coarse step's momenta differ from it by about
+/// `dt²/4 · ∇v·v`, a fraction `strain/4` of the step, and the differences add up over the
+/// steps. The anterior mitral leaflet, at σ = 0.37 mm, passes 0.5 at N = 5 within 10
+/// iterations (1.01 at the end), and carried to N = 10 then violates its constraints at the new
+/// time points by 13°; the automatic t001-sized fits stay at 0.17–0.47.
 fn too_strained(flow: &Flow, q0: &[Vec3], u: &[f64]) -> bool {
     let strains = flow.shoot(q0, u).and_then(|t| flow.step_strains(&t, u));
     // A NaN strain counts as past the limit.
-    strains.map_or(true, |s| {
-        s.iter().any(|x| x.is_nan() || *x > COARSE_STRAIN_LIMIT)
-    })
+    strains.map_or(true, |s| s.iter().any(|x| x.is_nan() || *x > STRAIN_LIMIT))
 }
 
 /// The number of constraints of `stage` (0 without).

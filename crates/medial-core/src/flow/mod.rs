@@ -34,6 +34,12 @@ pub mod kernel;
 use crate::flow::kernel::{F64Lanes, GaussianKernel, PairSweep, PairTerms, LANES};
 use crate::{Error, Result, Vec3};
 
+/// The step strain `dt · max_i ‖∇v^n(q^n_i)‖` ([`Flow::step_strains`]) up to which a step
+/// counts as resolved: a step is one-to-one while its strain is below 1 (checked at the
+/// landmarks only), half of that leaves a margin for the field between them. A fit warns past
+/// it, and coarse time steps are left past it (`fit::augmented_lagrangian`).
+pub const STRAIN_LIMIT: f64 = 0.5;
+
 /// Momenta of `k` landmarks in `from` time steps (`u[(n·k + i)·3 + c]`) carried to `to` steps,
 /// the control piecewise constant in time: into `to = f·from` steps each step's momenta are
 /// repeated `f` times (each coarse step's velocity field held over its `f` fine steps: to first
