@@ -31,7 +31,7 @@
 pub mod ambient;
 pub mod kernel;
 
-use crate::flow::kernel::{F64Lanes, GaussianKernel, PairSweep, PairTerms, LANES};
+use crate::flow::kernel::{F64Lanes, GaussianKernel, Layout, PairSweep, PairTerms, LANES};
 use crate::{Error, Result, Vec3};
 
 /// The step strain `dt · max_i ‖∇v^n(q^n_i)‖` ([`Flow::step_strains`]) up to which a step
@@ -103,6 +103,11 @@ pub struct Trajectory {
     /// `q^n`, `n = 0 … N`.
     positions: Vec<Vec<Vec3>>,
     kinetic: f64,
+    /// The layout of each step's sweep, `n = 0 … N−1` (it depends on `q^n` only), which the
+    /// backward pass and [`Flow::step_strains`] sweep in again, and the kernel's cutoff radius
+    /// it was made for.
+    layouts: Vec<Layout>,
+    cutoff: f64,
 }
 
 impl Trajectory {
@@ -250,6 +255,7 @@ impl Flow {
     /// (truncated with the flow's kernel tolerance), the same bits for any thread count.
     pub fn step_strains(&self, trajectory: &Trajectory, u: &[f64]) -> Result<Vec<f64>> {
         self.check_sizes(trajectory.positions(0), u)?;
+        self.check_trajectory(trajectory)?;
         let scale = self.dt() / (self.kernel.sigma() * self.kernel.sigma());
         Ok(rayon::scope(|_| {
             let mut sweep = PairSweep::new(&self.kernel, self.landmarks);
@@ -260,7 +266,7 @@ impl Flow {
                         trajectory.positions(n),
                         self.step_controls(u, n),
                     );
-                    sweep.run(&StrainTerms);
+                    sweep.run_laid_out(&StrainTerms, &trajectory.layouts[n]);
                     // The largest, NaN if any is (`f64::max` would drop it).
                     let largest = (0..self.landmarks)
                         .map(|i| sweep.sums(i).iter().map(|s| s * s).sum::<f64>().sqrt())
@@ -276,12 +282,14 @@ impl Flow {
         let dt = self.dt();
         let mut sweep = PairSweep::new(&self.kernel, self.landmarks);
         let mut positions = Vec::with_capacity(self.steps + 1);
+        let mut layouts = Vec::with_capacity(self.steps);
         positions.push(q0.to_vec());
         let mut kinetic = 0.0;
         for n in 0..self.steps {
             let (q, un) = (&positions[n], self.step_controls(u, n));
             load(&mut sweep, q, un);
             sweep.run(&VelocityTerms);
+            layouts.push(sweep.layout().clone());
             let mut step_ke = 0.0;
             let next = (q.iter().zip(un.chunks_exact(3)).enumerate())
                 .map(|(i, (qi, ui))| {
@@ -303,7 +311,12 @@ impl Flow {
                 "the flow diverged: non-finite landmark positions".into(),
             ));
         }
-        Ok(Trajectory { positions, kinetic })
+        Ok(Trajectory {
+            positions,
+            kinetic,
+            layouts,
+            cutoff: self.kernel.cutoff_radius(),
+        })
     }
 
     /// The backward pass: the gradient `∂E/∂u` (written to `grad`, length `N·k·3`) of
@@ -326,15 +339,23 @@ impl Flow {
                 found: grad.len(),
             });
         }
+        self.check_trajectory(trajectory)?;
+        // On a worker thread of the pool, as in `shoot`.
+        rayon::scope(|_| self.backward_steps(trajectory, u, terminal, add_state_gradient, grad));
+        Ok(())
+    }
+
+    /// Refuses a trajectory that this flow's forward pass cannot have computed: another step
+    /// count, landmark count or kernel cutoff.
+    fn check_trajectory(&self, trajectory: &Trajectory) -> Result<()> {
         if trajectory.time_points() != self.steps + 1
             || trajectory.positions[0].len() != self.landmarks
+            || trajectory.cutoff.to_bits() != self.kernel.cutoff_radius().to_bits()
         {
             return Err(Error::InvalidParameter(
                 "the trajectory was not computed by this flow".into(),
             ));
         }
-        // On a worker thread of the pool, as in `shoot`.
-        rayon::scope(|_| self.backward_steps(trajectory, u, terminal, add_state_gradient, grad));
         Ok(())
     }
 
@@ -354,6 +375,7 @@ impl Flow {
             let q = &trajectory.positions[n];
             self.adjoint_step(
                 &mut sweep,
+                &trajectory.layouts[n],
                 q,
                 self.step_controls(u, n),
                 &mut adjoint,
@@ -365,12 +387,13 @@ impl Flow {
         }
     }
 
-    /// One backward step at the positions `q = q^n` with the momenta `u = u^n`: from
-    /// `a^{n+1}` (in `adjoint`), writes `∂E/∂u^n` to `grad` and leaves `a^n` without `∇Φ^n` in
-    /// `adjoint`.
+    /// One backward step at the positions `q = q^n` (laid out in `layout`, the forward step's)
+    /// with the momenta `u = u^n`: from `a^{n+1}` (in `adjoint`), writes `∂E/∂u^n` to `grad`
+    /// and leaves `a^n` without `∇Φ^n` in `adjoint`.
     fn adjoint_step(
         &self,
         sweep: &mut PairSweep<12, 6>,
+        layout: &Layout,
         q: &[Vec3],
         u: &[f64],
         adjoint: &mut [Vec3],
@@ -389,7 +412,7 @@ impl Flow {
                 ],
             );
         }
-        sweep.run(&AdjointTerms);
+        sweep.run_laid_out(&AdjointTerms, layout);
         for (i, ((gi, ui), ai)) in grad
             .chunks_exact_mut(3)
             .zip(u.chunks_exact(3))

@@ -28,7 +28,7 @@ pub(crate) const LANES: usize = 8;
 
 pub(crate) use field::{map_points, PointMap, Sources};
 pub(crate) use lanes::{F64Lanes, Isa, Real};
-pub(crate) use sweep::{PairSweep, PairTerms};
+pub(crate) use sweep::{Layout, PairSweep, PairTerms};
 
 /// Largest kernel tolerance ε: below `e^{−1/2}` the cutoff radius exceeds σ, which the bound
 /// on the adjoint's sums needs (see the `sweep` module).

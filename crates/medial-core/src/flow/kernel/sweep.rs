@@ -41,19 +41,19 @@ use std::ops::Range;
 /// finite.
 pub(super) const PADDING_DISTANCE: f64 = 1e100;
 
-/// Smallest and largest number of rows (and columns) of a block of an exact pair sweep. Small
-/// blocks give a problem of a few hundred landmarks tens of tiles to share between threads;
-/// large blocks make fewer partial sums to store and reduce when there are thousands.
+/// Smallest and largest number of rows (and columns) of a block of a pair sweep, exact or
+/// truncated. Small blocks give a problem of a few hundred landmarks tens of tiles to share
+/// between threads; large blocks make fewer partial sums to store and reduce when there are
+/// thousands. A truncated sweep prunes its pairs chunk pair by chunk pair, so its blocks can be
+/// large while the pairs swept stay near; with 256-row blocks the truncated automatic fits of
+/// t001-bent (k = 503: 2 blocks) and of the anterior mitral leaflet (k = 1,433: 6 blocks) left
+/// a thread idle, and took 1.09× and 1.04× the wall time of 64 and 128 rows (paired runs).
 const BLOCK_RANGE: (usize, usize) = (64, 256);
 
-/// Rows of a block of a truncated sweep: 32 chunks of [`LANES`] slots, whose pairs are pruned
-/// chunk pair by chunk pair (a mask of 32 bits per row chunk), so that blocks can be large
-/// (few tiles and partial sums) while the pairs swept stay near.
-const TRUNCATED_BLOCK: usize = 256;
-
-/// Chunks of [`LANES`] slots per block of a truncated sweep: at most the 32 bits of a mask.
-const CHUNKS_PER_BLOCK: usize = TRUNCATED_BLOCK / LANES;
-const _: () = assert!(CHUNKS_PER_BLOCK <= 32 && TRUNCATED_BLOCK % LANES == 0);
+/// Chunks of [`LANES`] slots per block of a truncated sweep at most: the 32 bits of a mask
+/// (and the stride of [`Layout::masks`]).
+const CHUNKS_PER_BLOCK: usize = BLOCK_RANGE.1 / LANES;
+const _: () = assert!(CHUNKS_PER_BLOCK <= 32 && BLOCK_RANGE.0 % LANES == 0);
 
 /// Cells of the grid of a truncated sweep per cutoff radius: a fine curve, whose chunks of
 /// [`LANES`] consecutive points are tight clusters.
@@ -168,11 +168,31 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
         self.run_with(terms, Isa::best());
     }
 
+    /// [`PairSweep::run`] in `layout`, the layout of a sweep (of any points' numbers) with the
+    /// same kernel over the positions now set ([`PairSweep::layout`]): the same sums, without
+    /// sorting the points again. The backward pass's sweep at a time step takes the forward
+    /// pass's layout there.
+    pub(crate) fn run_laid_out<T: PairTerms<F, C>>(&mut self, terms: &T, layout: &Layout) {
+        debug_assert_eq!(layout.slot.len(), self.staged.len());
+        self.layout.clone_from(layout);
+        self.sweep(terms, Isa::best());
+    }
+
+    /// The layout of the last run.
+    pub(crate) fn layout(&self) -> &Layout {
+        &self.layout
+    }
+
     /// [`PairSweep::run`] with the inner loops `isa` (or portable ones if the CPU lacks it).
     fn run_with<T: PairTerms<F, C>>(&mut self, terms: &T, isa: Isa) {
         if self.cutoff.is_finite() {
             self.layout = Layout::truncated(&self.staged, self.cutoff, &mut self.order);
         }
+        self.sweep(terms, isa);
+    }
+
+    /// The sums in the present layout.
+    fn sweep<T: PairTerms<F, C>>(&mut self, terms: &T, isa: Isa) {
         self.lay_out_points();
         let len = self.layout.tiles.len() * 2 * C * self.layout.block;
         self.partials.resize(len, 0.0);
@@ -263,7 +283,7 @@ fn add_assign(sums: &mut [f64], part: &[f64]) {
 /// The slots of the points, their cut into blocks (the last one shorter), the tiles (I, J),
 /// I ≤ J, that are swept, in row-major order, and the partial sums each block adds up.
 #[derive(Clone, Debug)]
-struct Layout {
+pub(crate) struct Layout {
     /// The slot of every point.
     slot: Vec<usize>,
     padded: usize,
@@ -286,7 +306,7 @@ impl Layout {
     /// in [`BLOCK_RANGE`]), and every tile.
     fn exact(landmarks: usize) -> Self {
         let padded = landmarks.div_ceil(LANES) * LANES;
-        let block = exact_block(padded);
+        let block = block_rows(padded);
         let slot = (0..landmarks).collect();
         let tiles = upper_tiles(padded.div_ceil(block)).collect();
         Self::with_tiles(slot, padded, block, tiles, Vec::new())
@@ -296,7 +316,7 @@ impl Layout {
     /// block as [`Layout::exact`] chooses it for all the points), then the fixed ones; every
     /// tile but those of two fixed blocks.
     fn bipartite(free: usize, fixed: usize) -> Self {
-        let block = exact_block((free + fixed).div_ceil(LANES) * LANES);
+        let block = block_rows((free + fixed).div_ceil(LANES) * LANES);
         let free_blocks = free.div_ceil(block);
         let first_fixed = free_blocks * block;
         let padded = first_fixed + fixed.div_ceil(LANES) * LANES;
@@ -309,7 +329,7 @@ impl Layout {
 
     /// The points sorted along the Z-order curve of a grid of cells of side
     /// `cutoff / CELLS_PER_CUTOFF` (ties by index; `order`, the previous order, is sorted
-    /// into the new one), blocks of [`TRUNCATED_BLOCK`] slots, and per tile (I, J), I ≤ J, the
+    /// into the new one), blocks of [`block_rows`] slots, and per tile (I, J), I ≤ J, the
     /// chunk pairs (a, b), a ≤ b on a diagonal tile, whose chunks' bounding boxes are at most
     /// `cutoff` apart (or not comparable: non-finite coordinates); the tiles with none are
     /// left out.
@@ -335,7 +355,9 @@ impl Layout {
             .chunks(LANES)
             .map(|chunk| Aabb::of(chunk.iter().map(|&i| position(i))))
             .collect();
-        let block_boxes: Vec<Aabb> = (chunk_boxes.chunks(CHUNKS_PER_BLOCK))
+        let block = block_rows(padded);
+        let chunks_per_block = block / LANES;
+        let block_boxes: Vec<Aabb> = (chunk_boxes.chunks(chunks_per_block))
             .map(|boxes| boxes.iter().fold(Aabb::EMPTY, |b, c| b.union(c)))
             .collect();
         // Kept unless provably far: a NaN gap (non-finite coordinates) keeps the pair.
@@ -348,8 +370,8 @@ impl Layout {
             .filter(|&(bi, bj)| near(&block_boxes[bi], &block_boxes[bj]))
             .collect();
         let chunks = |b: usize| {
-            let end = ((b + 1) * CHUNKS_PER_BLOCK).min(chunk_boxes.len());
-            &chunk_boxes[b * CHUNKS_PER_BLOCK..end]
+            let end = ((b + 1) * chunks_per_block).min(chunk_boxes.len());
+            &chunk_boxes[b * chunks_per_block..end]
         };
         let masks: Vec<[u32; CHUNKS_PER_BLOCK]> = (candidates.par_iter())
             .map(|&(bi, bj)| {
@@ -371,7 +393,7 @@ impl Layout {
             .filter(|(_, masks)| masks.iter().any(|&m| m != 0))
             .unzip();
         let masks = masks.into_iter().flatten().collect();
-        Self::with_tiles(slot, padded, TRUNCATED_BLOCK, tiles, masks)
+        Self::with_tiles(slot, padded, block, tiles, masks)
     }
 
     /// The layout of `slot` with the `tiles` (I, J), I ≤ J, in row-major order, and their
@@ -406,9 +428,9 @@ impl Layout {
     }
 }
 
-/// The rows of a block of an exact sweep over `padded` slots: about a sixteenth of them, a
-/// power of two in [`BLOCK_RANGE`].
-fn exact_block(padded: usize) -> usize {
+/// The rows of a block of a sweep over `padded` slots: about a sixteenth of them, a power of
+/// two in [`BLOCK_RANGE`].
+fn block_rows(padded: usize) -> usize {
     (padded / 16)
         .next_power_of_two()
         .clamp(BLOCK_RANGE.0, BLOCK_RANGE.1)
@@ -846,7 +868,7 @@ mod tests {
             .collect();
         let (exact, all) = swept_sums(&points, 1.0, 0.0, Isa::best());
         let (truncated, few) = swept_sums(&points, 1.0, 1e-10, Isa::best());
-        let blocks = 4_000usize.div_ceil(TRUNCATED_BLOCK);
+        let blocks = 4_000usize.div_ceil(block_rows(4_000));
         assert!(few < 3 * blocks, "{few} tiles of {blocks} blocks");
         assert!(all < few * blocks);
         let magnitudes = term_magnitudes(&points);
