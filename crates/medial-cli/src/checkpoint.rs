@@ -20,8 +20,10 @@ pub const FILE: &str = "checkpoint.bin";
 /// The first bytes of a checkpoint file.
 const MAGIC: &[u8; 8] = b"MEDIALCK";
 
-/// The layout of the record after [`MAGIC`]; raised whenever [`Saved`] changes.
-const FORMAT: u32 = 1;
+/// The layout of the record after [`MAGIC`]; raised whenever [`Saved`] or the engine's
+/// checkpoint types in it change. 2: the L-BFGS state as nalgebra vectors and the coarse time
+/// steps' restart point (format 1 checkpoints read as damaged before).
+const FORMAT: u32 = 2;
 
 /// What a fit needs to go on where it paused.
 #[derive(Serialize, Deserialize)]
