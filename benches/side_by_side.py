@@ -20,12 +20,21 @@ Usage, from the repository root, in a virtual environment with jax and pykeops:
     venv/bin/python benches/side_by_side.py [--skip-bench] [--repeats 5]
 It runs `cargo bench -p medial --bench evaluation -- value_and_gradient_N40/fused` (which also
 writes the cases' landmarks), unless --skip-bench reuses the last run's results.
+
+`--in-fit` compares instead the cost of an evaluation inside a whole fit: the release binary
+fits the KeOps reduced hippocampus (k = 662, a plain mesh) to its own points moved by a smooth
+warp (written by this script: the KeOps tutorial's reduced target is not in correspondence),
+with flow, kinetic energy and SSD (the benchmark's objective), the automatic settings but
+N = 40 steps; its seconds per evaluation (L-BFGS, line search and every check included;
+`summary.json`) are set against JAX's and pykeops's value + gradient at the same landmarks,
+kernel width and N.
 """
 
 import argparse
 import json
 import os
 import pathlib
+import re
 import subprocess
 import sys
 import tempfile
@@ -145,12 +154,83 @@ def medial_seconds(name, k):
     return json.loads(estimates.read_text())["median"]["point_estimate"] * 1e-9
 
 
+def fit_seconds_per_evaluation(workdir):
+    """Landmarks, sigma and seconds per evaluation of the release binary's fit of the reduced
+    KeOps hippocampus in N = 40 steps (automatic settings otherwise)."""
+    data = ROOT.parent / "shared/data/keops"
+    subprocess.run(["cargo", "build", "--release", "-p", "medial-cli"], cwd=ROOT, check=True)
+    medial = ROOT / "target/release/medial"
+    template, target = data / "hippos_reduc_source.vtk", workdir / "warped.vtk"
+    write_warped(template, target)
+    auto = workdir / "automatic"
+    fit = [str(medial), "fit", "--quiet"]
+    subprocess.run(fit + ["--template", str(template), "--target", str(target), "--out", str(auto)], check=True, stdout=subprocess.DEVNULL)
+    config = (auto / "config.toml").read_text()
+    config, steps = re.subn(r"(?m)^time_steps = \d+$", f"time_steps = {STEPS}", config)
+    assert steps == 1, "no time_steps in the resolved config"
+    (workdir / "n40.toml").write_text(config)
+    subprocess.run(fit + [str(workdir / "n40.toml"), "--out", str(workdir / "n40")], check=True, stdout=subprocess.DEVNULL)
+    summary = json.loads((workdir / "n40/summary.json").read_text())
+    seconds = sum(s["seconds"] for s in summary["stages"])
+    evaluations = sum(s["evaluations"] for s in summary["stages"])
+    sigma = float(re.search(r"(?m)^sigma = (.+)$", config).group(1))
+    return read_vtk_points(template), sigma, seconds / evaluations, evaluations
+
+
+def read_vtk_points(path):
+    """The points of a legacy ASCII VTK polydata file."""
+    words = path.read_text().split()
+    n = int(words[words.index("POINTS") + 1])
+    start = words.index("POINTS") + 3
+    return np.array(words[start : start + 3 * n], dtype=float).reshape(n, 3)
+
+
+def write_warped(source, out):
+    """`source`'s points moved by a smooth warp of a few millimetres (vertex i to vertex i)."""
+    q = read_vtk_points(source)
+    x, y, z = q.T
+    moved = q + np.stack([2 * np.sin(0.1 * y), 2 * np.cos(0.1 * z) - 1, 0.05 * (x - x.mean())], axis=1)
+    text = source.read_text()
+    head, rest = text.split("POINTS", 1)
+    polygons = rest[rest.index("POLYGONS") :]
+    points = "\n".join(" ".join(f"{c:.6f}" for c in p) for p in moved)
+    out.write_text(f"{head}POINTS {len(q)} double\n{points}\n{polygons}")
+
+
+def compare(name, q, sigma, ours, repeats):
+    """Times the two peers on landmarks `q` and prints their ratios to `ours` (seconds)."""
+    u = momenta(q)
+    jax_run, keops_run = jax_value_and_grad(q, sigma), keops_value_and_grad(q, sigma)
+    t_jax, (_, g_jax) = best_of(repeats, lambda: jax_run(u))
+    t_keops, (_, g_keops) = best_of(repeats, lambda: keops_run(u))
+    diff = np.linalg.norm(g_jax - g_keops) / np.linalg.norm(g_jax)
+    print(
+        f"{name:<10} {len(q):>6} {ours * 1e3:>8.1f}ms {t_jax * 1e3:>8.1f}ms {t_keops * 1e3:>8.1f}ms "
+        f"{t_jax / ours:>10.1f}x {t_keops / ours:>12.1f}x {diff:>10.1e}"
+    )
+    sys.stdout.flush()
+
+
+HEADER = (
+    f"{'case':<10} {'k':>6} {'medial':>10} {'JAX':>10} {'pykeops':>10} {'JAX/medial':>11} "
+    f"{'keops/medial':>13} {'grad diff':>10}"
+)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--skip-bench", action="store_true", help="reuse the last criterion run")
     parser.add_argument("--repeats", type=int, default=5, help="timed runs per peer (median)")
     parser.add_argument("--cases", default=",".join(CASES), help="comma-separated case names")
+    parser.add_argument("--in-fit", action="store_true", help="time a whole fit at k = 662, N = 40")
     args = parser.parse_args()
+    if args.in_fit:
+        with tempfile.TemporaryDirectory() as workdir:
+            q, sigma, ours, evaluations = fit_seconds_per_evaluation(pathlib.Path(workdir))
+        print(f"medial fit of the reduced hippocampus, N = {STEPS}: {evaluations} evaluations")
+        print(HEADER)
+        compare("in-fit", q, sigma, ours, args.repeats)
+        return
     cases_dir = pathlib.Path(os.environ.get("MEDIAL_BENCH_CASES") or tempfile.mkdtemp())
     if not args.skip_bench:
         env = dict(os.environ, MEDIAL_BENCH_CASES=str(cases_dir))
@@ -160,20 +240,10 @@ def main():
             env=env,
             check=True,
         )
-    print(f"{'case':<10} {'k':>6} {'medial':>10} {'JAX':>10} {'pykeops':>10} {'JAX/medial':>11} {'keops/medial':>13} {'grad diff':>10}")
+    print(HEADER)
     for name in args.cases.split(","):
         q, sigma = read_case(cases_dir / f"{name}.csv")
-        u = momenta(q)
-        ours = medial_seconds(name, len(q))
-        jax_run, keops_run = jax_value_and_grad(q, sigma), keops_value_and_grad(q, sigma)
-        t_jax, (_, g_jax) = best_of(args.repeats, lambda: jax_run(u))
-        t_keops, (_, g_keops) = best_of(args.repeats, lambda: keops_run(u))
-        diff = np.linalg.norm(g_jax - g_keops) / np.linalg.norm(g_jax)
-        print(
-            f"{name:<10} {len(q):>6} {ours * 1e3:>8.1f}ms {t_jax * 1e3:>8.1f}ms {t_keops * 1e3:>8.1f}ms "
-            f"{t_jax / ours:>10.1f}x {t_keops / ours:>12.1f}x {diff:>10.1e}"
-        )
-        sys.stdout.flush()
+        compare(name, q, sigma, medial_seconds(name, len(q)), args.repeats)
 
 
 if __name__ == "__main__":
