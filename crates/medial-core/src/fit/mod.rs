@@ -1,5 +1,5 @@
 //! Fitting: the objective of one stage and its exact gradient ([`objective`]), its minimisation
-//! with L-BFGS ([`optimize`]) with every iterate checked for soundness ([`guard`]), the
+//! with L-BFGS ([`optimize`], on vectors whose algebra runs in parallel: [`lbfgs_vector`]) with every iterate checked for soundness ([`guard`]), the
 //! augmented-Lagrangian schedule of a stage ([`augmented_lagrangian`]), and a whole fit of
 //! several stages in a row ([`stages`]), which can pause after any accepted iterate and resume
 //! from a serialisable [`Checkpoint`] to the same bits; and the initial alignment, a similarity
@@ -8,6 +8,7 @@
 pub mod align;
 pub mod augmented_lagrangian;
 pub mod guard;
+pub mod lbfgs_vector;
 pub mod objective;
 pub mod optimize;
 pub mod stages;

@@ -11,12 +11,12 @@
 //! - an iterate is unsound ([`crate::fit::guard`]) and no shorter step towards it is sound.
 
 use crate::fit::guard::Unsound;
+use crate::fit::lbfgs_vector::LbfgsVector;
 use crate::fit::objective::{Evaluation, Objective};
 use crate::{Error, Result};
 use argmin::core::{CostFunction, Gradient, IterState, Problem, Solver, State, TerminationStatus};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::LBFGS;
-use nalgebra::DVector;
 use serde::{Deserialize, Serialize};
 use std::sync::Mutex;
 
@@ -180,12 +180,9 @@ pub enum Minimization {
     Paused(Box<MinimizerCheckpoint>),
 }
 
-/// The momenta as L-BFGS sees them: nalgebra vectors, whose dot products (about 3 per
-/// correction pair and iteration) sum in eight running terms. With argmin-math's `Vec` ones,
-/// summed term after term (a chain of dependent additions), the leaflet's iterations
-/// (k = 1,433, N = 10: 43,000 momenta) spent about 1.2 ms each in L-BFGS's own arithmetic,
-/// on one thread while the pool waited.
-type Params = DVector<f64>;
+/// The momenta as L-BFGS sees them: vectors whose algebra runs on the thread pool, the same
+/// bits for any thread count ([`LbfgsVector`]).
+type Params = LbfgsVector;
 
 /// The L-BFGS solver as argmin holds it: its correction pairs and its line search.
 type Lbfgs = LBFGS<MoreThuenteLineSearch<Params, Params, f64>, Params, Params, f64>;
@@ -525,7 +522,7 @@ fn start_segment(
         .and_then(|s| s.with_tolerance_cost(0.0))
         .map_err(|e| Error::Optimisation(e.to_string()))?;
     let state = IterState::new()
-        .param(Params::from_column_slice(&sound.momenta))
+        .param(Params::from_slice(&sound.momenta))
         .max_iters((options.max_iterations - sound.iteration) as u64);
     Ok(solver.init(problem, state).map(|(mut state, _)| {
         state.update();
@@ -696,6 +693,6 @@ impl Gradient for &Cached<'_, '_> {
     fn gradient(&self, u: &Params) -> std::result::Result<Params, argmin::core::Error> {
         self.ensure(u.as_slice())
             .map_err(|e| argmin::core::Error::msg(e.to_string()))?;
-        Ok(Params::from_column_slice(&self.lock().gradient))
+        Ok(Params::from_slice(&self.lock().gradient))
     }
 }
