@@ -22,8 +22,9 @@ const MAGIC: &[u8; 8] = b"MEDIALCK";
 
 /// The layout of the record after [`MAGIC`]; raised whenever [`Saved`] or the engine's
 /// checkpoint types in it change. 2: the L-BFGS state as nalgebra vectors and the coarse time
-/// steps' restart point (format 1 checkpoints read as damaged before).
-const FORMAT: u32 = 2;
+/// steps' restart point (format 1 checkpoints read as damaged before); 3: the L-BFGS state
+/// as plain lists (`medial_core::fit::lbfgs_vector`).
+const FORMAT: u32 = 3;
 
 /// What a fit needs to go on where it paused.
 #[derive(Serialize, Deserialize)]

@@ -87,11 +87,10 @@ fn configure_threads(threads: Option<usize>) -> Result<usize, CliError> {
     if threads == Some(0) {
         return Err(CliError::Input("--threads must be at least 1".into()));
     }
-    let n = threads.unwrap_or(0);
     rayon::ThreadPoolBuilder::new()
-        .num_threads(n)
+        .num_threads(threads.unwrap_or(0))
         .stack_size(STACK_BYTES)
         .build_global()
-        .map_err(|e| CliError::Input(format!("cannot start {n} threads: {e}")))?;
+        .map_err(|e| CliError::Input(format!("cannot start the worker threads: {e}")))?;
     Ok(rayon::current_num_threads())
 }

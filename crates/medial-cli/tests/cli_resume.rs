@@ -492,12 +492,12 @@ fn a_resume_with_another_config_or_input_is_refused() {
     );
     // A checkpoint of an earlier format (the 4 bytes after the magic).
     let mut earlier = checkpoint.clone();
-    earlier[8..12].copy_from_slice(&1u32.to_le_bytes());
+    earlier[8..12].copy_from_slice(&2u32.to_le_bytes());
     std::fs::write(out.join("checkpoint.bin"), &earlier).unwrap();
     one_line_error(
         &["fit", s(&base.config), "--resume", s(&out)],
         1,
-        &["checkpoint format 1 is not this medial's"],
+        &["checkpoint format 2 is not this medial's"],
     );
     // A damaged checkpoint, and none.
     std::fs::write(

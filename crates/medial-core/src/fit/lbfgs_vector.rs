@@ -5,7 +5,7 @@
 //! An L-BFGS iteration with memory m passes over its vectors about 7m + 10 times (3m + 2 dot
 //! products, 2m scaled additions that each make a product and then a sum, the copies argmin
 //! makes of the iterate and gradient). With m = 10 and 79,000 momenta (the reduced KeOps
-//! hippocampus in 40 steps) those are about 45 MB of memory traffic per iteration.
+//! hippocampus in 40 steps) those are about 50 MB of memory traffic per iteration.
 //! argmin-math's nalgebra and `Vec` backends are sequential, so the operations are written
 //! here (no maintained crate offers deterministic parallel argmin-math vectors).
 //!
