@@ -118,6 +118,24 @@ pub enum CliError {
         /// Determinant of the 3×3 linear part.
         determinant: f64,
     },
+    /// The `--target` points do not correspond to the template's boundary points one for one:
+    /// the best similarity between the two accounts for too little of the points' spread.
+    #[error(
+        "{}: the points do not seem to correspond to the template boundary's, point for point: \
+         the best similarity between them accounts for {:.0} % of the points' spread (at least \
+         {:.0} % expected); a mesh without correspondence goes in --surface",
+        path.display(),
+        100.0 * explained,
+        100.0 * minimum
+    )]
+    NoCorrespondence {
+        /// The target points.
+        path: PathBuf,
+        /// The fraction of their spread explained (`medial_core::fit::explained_spread`).
+        explained: f64,
+        /// The least fraction accepted.
+        minimum: f64,
+    },
     /// A figure of the report could not be drawn.
     #[error("report figure '{figure}': {message}")]
     Figure {

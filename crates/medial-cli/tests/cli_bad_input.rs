@@ -382,3 +382,39 @@ fn config_errors_take_one_line() {
         &["fit.toml: line 1, column"],
     );
 }
+
+#[test]
+fn target_points_out_of_order_are_refused_naming_the_surface_flag() {
+    // The toy target's own boundary points, in a scrambled order: the same shape, no
+    // correspondence (the best similarity explains about 1 % of their spread; corresponding
+    // targets of the README's table 97–100 %).
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = medial_io::mesh::read_mesh(&toy("target_boundary.vtk")).unwrap();
+    let n = mesh.points().len();
+    let scrambled: Vec<_> = (0..n).map(|i| mesh.points()[(i * 89 + 7) % n]).collect();
+    let triangles: Vec<[usize; 3]> = (0..n - 2).map(|i| [i, i + 1, i + 2]).collect();
+    let target = dir.path().join("points.vtk");
+    let points = medial_core::TriMesh::new(scrambled, triangles);
+    medial_io::mesh::write_mesh(&target, &points.unwrap()).unwrap();
+    let out = dir.path().join("out");
+    let template = toy("template.vtk");
+    one_line_error(
+        &[
+            "fit",
+            "--template",
+            s(&template),
+            "--target",
+            s(&target),
+            "--out",
+            s(&out),
+            "-q",
+        ],
+        1,
+        &[
+            "points.vtk: the points do not seem to correspond to the template boundary's",
+            "at least 50 % expected",
+            "--surface",
+        ],
+    );
+    assert!(!out.join("summary.json").exists());
+}

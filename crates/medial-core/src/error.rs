@@ -54,6 +54,9 @@ pub enum Error {
         /// Seams found (lines where three or more sheets meet).
         seams: usize,
     },
+    /// No initial map between corresponding point sets ([`crate::fit::align::AlignmentFailure`]).
+    #[error("{0}")]
+    Alignment(#[from] crate::fit::align::AlignmentFailure),
     /// The optimiser failed (not merely stopped early).
     #[error("optimisation failed: {0}")]
     Optimisation(String),

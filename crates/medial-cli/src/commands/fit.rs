@@ -16,9 +16,9 @@ use crate::summary::{Figures, StageSummary, Status, Summary};
 use crate::time_points::{self, time_points};
 use medial_core::build::project::{project, ConstraintFigures, ProjectOptions};
 use medial_core::fit::{
-    affine_between, align_affine, align_similarity, anisotropy, run_stages_resumable,
-    similarity_between, Checkpoint, ConstraintSet, FitEvent, FitRun, Guard, PlannedStage, Stage,
-    StageOutcome,
+    affine_between, align_affine, align_similarity, anisotropy, explained_spread,
+    run_stages_resumable, similarity_between, AlignmentFailure, Checkpoint, ConstraintSet,
+    FitEvent, FitRun, Guard, PlannedStage, Stage, StageOutcome,
 };
 use medial_core::flow::{Flow, Trajectory, STRAIN_LIMIT};
 use medial_core::image::rasterize::{grid_around, rasterize};
@@ -263,6 +263,11 @@ fn align_to_image(
     Ok(a.matrix * s.matrix)
 }
 
+/// The least fraction of the target points' spread ([`explained_spread`]) that the
+/// least-squares similarity must account for: below it the points are taken not to correspond
+/// to the template boundary's, one for one.
+const MIN_EXPLAINED_SPREAD: f64 = 0.5;
+
 /// The least-squares similarity to the corresponding points, or the least-squares affine map
 /// when it is more than [`AFFINE_ANISOTROPY`] from a similarity (and preserves orientation:
 /// points that correspond poorly can call for a reflection).
@@ -273,10 +278,24 @@ fn align_to_points(
 ) -> Result<Matrix4<f64>, CliError> {
     let bad = |e: medial_core::Error| CliError::Input(format!("{}: {e}", points.display()));
     let similarity = similarity_between(boundary.points(), q).map_err(bad)?;
+    let explained = explained_spread(&carry_points(boundary.points(), &similarity), q);
+    if explained.is_nan() || explained < MIN_EXPLAINED_SPREAD {
+        return Err(CliError::NoCorrespondence {
+            path: points.to_path_buf(),
+            explained,
+            minimum: MIN_EXPLAINED_SPREAD,
+        });
+    }
     let affine = match affine_between(boundary.points(), q) {
         Ok(affine) => affine,
         Err(e) => {
-            tracing::warn!("no initial affine map, the similarity alone: {e}");
+            let hint = match e {
+                medial_core::Error::Alignment(AlignmentFailure::Reflection { .. }) => {
+                    " (a mesh without correspondence goes in --surface)"
+                }
+                _ => "",
+            };
+            tracing::warn!("no initial affine map, the similarity alone: {e}{hint}");
             similarity
         }
     };
@@ -291,13 +310,18 @@ fn align_to_points(
     };
     let (rms_similarity, rms_affine) = (rms(&similarity), rms(&affine));
     if anisotropy(&affine) <= AFFINE_ANISOTROPY {
-        tracing::info!("initial similarity: rms distance {rms_similarity:.3} mm");
+        tracing::info!(
+            "initial similarity: rms distance {rms_similarity:.3} mm, {:.1} % of the points' \
+             spread explained",
+            100.0 * explained
+        );
         return Ok(similarity);
     }
     tracing::info!(
-        "initial affine: anisotropy {:.1} %, rms distance {rms_similarity:.3} mm (similarity) → \
-         {rms_affine:.3} mm",
-        100.0 * anisotropy(&affine)
+        "initial affine: anisotropy {:.1} %, rms distance {rms_similarity:.3} mm (similarity, \
+         {:.1} % of the points' spread explained) → {rms_affine:.3} mm",
+        100.0 * anisotropy(&affine),
+        100.0 * explained
     );
     Ok(affine)
 }

@@ -186,9 +186,7 @@ pub fn similarity_between(p: &[Vec3], q: &[Vec3]) -> Result<Matrix4<f64>> {
     let r = u * Matrix3::from_diagonal(&d) * v_t;
     let scale = svd.singular_values.dot(&d) / spread;
     if !(scale.is_finite() && scale > 0.0) {
-        return Err(Error::InvalidParameter(format!(
-            "no similarity between the points (scale {scale})"
-        )));
+        return Err(AlignmentFailure::Scale { scale }.into());
     }
     let mut m = (r * scale).to_homogeneous();
     m.fixed_view_mut::<3, 1>(0, 3)
@@ -243,8 +241,8 @@ fn symmetric_power(s: &Matrix3<f64>, a: f64) -> Option<Matrix3<f64>> {
 }
 
 /// The affine `p ↦ A p + t` minimising `Σ |A p_i + t − q_i|²` over corresponding points:
-/// with centred points, `A = (Σ q̃ p̃ᵀ)(Σ p̃ p̃ᵀ)⁻¹`, `t = q̄ − A p̄`. An error when the points
-/// `p` are (nearly) coplanar, or the map would reflect.
+/// with centred points, `A = (Σ q̃ p̃ᵀ)(Σ p̃ p̃ᵀ)⁻¹`, `t = q̄ − A p̄`. An error
+/// ([`AlignmentFailure`]) when the points `p` are (nearly) coplanar, or the map would reflect.
 pub fn affine_between(p: &[Vec3], q: &[Vec3]) -> Result<Matrix4<f64>> {
     if p.len() != q.len() || p.len() < 4 {
         return Err(Error::ShapeMismatch {
@@ -261,22 +259,60 @@ pub fn affine_between(p: &[Vec3], q: &[Vec3]) -> Result<Matrix4<f64>> {
         .map(|(a, b)| (b - qc) * (a - pc).transpose())
         .sum();
     let spread: Matrix3<f64> = p.iter().map(|a| (a - pc) * (a - pc).transpose()).sum();
-    let linear = spread
+    let inverse = spread
         .try_inverse()
         .filter(|_| spread.determinant().abs() > 1e-12 * spread.norm().powi(3))
-        .map(|inverse| cross * inverse)
-        .filter(|a| a.determinant() > 0.0 && a.iter().all(|x| x.is_finite()))
-        .ok_or_else(|| {
-            Error::InvalidParameter(
-                "no orientation-preserving affine map between the points (coplanar points or a \
-                 reflection)"
-                    .into(),
-            )
-        })?;
+        .ok_or(AlignmentFailure::Coplanar)?;
+    let linear = cross * inverse;
+    let determinant = linear.determinant();
+    if !(determinant > 0.0 && linear.iter().all(|x| x.is_finite())) {
+        return Err(AlignmentFailure::Reflection { determinant }.into());
+    }
     let mut m = linear.to_homogeneous();
     m.fixed_view_mut::<3, 1>(0, 3)
         .copy_from(&(qc - linear * pc));
     Ok(m)
+}
+
+/// The fraction of the spread of the points `q` about their centroid `q̄` that the points
+/// `moved` (a map of points corresponding to `q`, one for one) account for:
+/// `1 − Σ |moved_i − q_i|² / Σ |q_i − q̄|²` (1 for a perfect match, about 0 or below for points
+/// that do not correspond; NaN for coincident `q`).
+pub fn explained_spread(moved: &[Vec3], q: &[Vec3]) -> f64 {
+    let n = q.len() as f64;
+    let qc = q.iter().sum::<Vec3>() / n;
+    let residual: f64 = moved
+        .iter()
+        .zip(q)
+        .map(|(m, b)| (m - b).norm_squared())
+        .sum();
+    let spread: f64 = q.iter().map(|b| (b - qc).norm_squared()).sum();
+    1.0 - residual / spread
+}
+
+/// Why no map between two sets of corresponding points was found.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum AlignmentFailure {
+    /// The template's points lie (nearly) in a plane: their covariance is singular and no
+    /// affine map is determined.
+    #[error("the template's points are (nearly) coplanar: no affine map between the points")]
+    Coplanar,
+    /// The least-squares affine map turns space inside out (`det A ≤ 0`), which happens when
+    /// the points do not correspond in order: pairs of unrelated points pull `A` towards 0.
+    #[error(
+        "the least-squares affine map between the points reflects (determinant {determinant:.3}): \
+         the points do not seem to correspond to the template boundary's, point for point"
+    )]
+    Reflection {
+        /// `det A`.
+        determinant: f64,
+    },
+    /// The least-squares scale is not positive: the points do not correspond at all.
+    #[error("no similarity between the points (least-squares scale {scale})")]
+    Scale {
+        /// `s`.
+        scale: f64,
+    },
 }
 
 /// How far the linear part of `m` is from a similarity: `σ_max / σ_min − 1` of its singular
@@ -386,9 +422,35 @@ mod tests {
         let found = affine_between(&p, &q).unwrap();
         assert!((found - m).amax() < 1e-12, "{found}");
         let flat: Vec<Vec3> = p.iter().map(|a| Vec3::new(a.x, a.y, 0.0)).collect();
-        assert!(affine_between(&flat, &q).is_err());
+        assert!(matches!(
+            affine_between(&flat, &q),
+            Err(Error::Alignment(AlignmentFailure::Coplanar))
+        ));
         let mirrored: Vec<Vec3> = p.iter().map(|a| Vec3::new(-a.x, a.y, a.z)).collect();
-        assert!(affine_between(&p, &mirrored).is_err());
+        let reflection = affine_between(&p, &mirrored).unwrap_err();
+        assert!(
+            matches!(reflection, Error::Alignment(AlignmentFailure::Reflection { determinant }) if (determinant + 1.0).abs() < 1e-12),
+            "{reflection}"
+        );
+        assert!(reflection.to_string().contains("do not seem to correspond"));
+    }
+
+    #[test]
+    fn the_explained_spread_tells_corresponding_points_from_scrambled_ones() {
+        let (p, _) = stretched(Vec3::new(1.0, 2.0, 3.0), 1.0).into_parts();
+        assert_eq!(explained_spread(&p, &p), 1.0);
+        // A rotation of the octahedron's vertices: the same shape, no correspondence.
+        let n = p.len();
+        let scrambled: Vec<Vec3> = (0..n).map(|i| p[(i + 1) % n]).collect();
+        let m = similarity_between(&p, &scrambled).unwrap();
+        let moved: Vec<Vec3> = p
+            .iter()
+            .map(|a| m.transform_point(&(*a).into()).coords)
+            .collect();
+        let explained = explained_spread(&moved, &scrambled);
+        assert!(explained < 0.5, "{explained}");
+        let near: Vec<Vec3> = p.iter().map(|a| a + Vec3::new(0.1, 0.0, 0.0)).collect();
+        assert!((explained_spread(&near, &p) - 1.0).abs() < 0.01);
     }
 
     #[test]

@@ -14,7 +14,8 @@ pub mod optimize;
 pub mod stages;
 
 pub use align::{
-    affine_between, align_affine, align_similarity, anisotropy, similarity_between, Alignment,
+    affine_between, align_affine, align_similarity, anisotropy, explained_spread,
+    similarity_between, Alignment, AlignmentFailure,
 };
 pub use augmented_lagrangian::{
     run_stage, AlSchedule, CoarseTime, MuUpdate, Progress, Stage, StageCheckpoint, StageOutcome,
