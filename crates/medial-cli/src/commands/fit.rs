@@ -17,8 +17,8 @@ use crate::time_points::{self, time_points};
 use medial_core::build::project::{project, ConstraintFigures, ProjectOptions};
 use medial_core::fit::{
     affine_between, align_affine, align_similarity, anisotropy, explained_spread,
-    run_stages_resumable, similarity_between, AlignmentFailure, Checkpoint, ConstraintSet,
-    FitEvent, FitRun, Guard, PlannedStage, Stage, StageOutcome,
+    run_stages_resumable, similarity_between, Checkpoint, ConstraintSet, FitEvent, FitRun, Guard,
+    PlannedStage, Stage, StageOutcome,
 };
 use medial_core::flow::{Flow, Trajectory, STRAIN_LIMIT};
 use medial_core::image::rasterize::{grid_around, rasterize};
@@ -270,7 +270,8 @@ const MIN_EXPLAINED_SPREAD: f64 = 0.5;
 
 /// The least-squares similarity to the corresponding points, or the least-squares affine map
 /// when it is more than [`AFFINE_ANISOTROPY`] from a similarity (and preserves orientation:
-/// points that correspond poorly can call for a reflection).
+/// points that correspond poorly can call for a reflection). Points that the similarity
+/// explains less than [`MIN_EXPLAINED_SPREAD`] of are refused: they do not correspond.
 fn align_to_points(
     boundary: &TriMesh,
     q: &[Vec3],
@@ -278,7 +279,8 @@ fn align_to_points(
 ) -> Result<Matrix4<f64>, CliError> {
     let bad = |e: medial_core::Error| CliError::Input(format!("{}: {e}", points.display()));
     let similarity = similarity_between(boundary.points(), q).map_err(bad)?;
-    let explained = explained_spread(&carry_points(boundary.points(), &similarity), q);
+    let by_similarity = carry_points(boundary.points(), &similarity);
+    let explained = explained_spread(&by_similarity, q);
     if explained.is_nan() || explained < MIN_EXPLAINED_SPREAD {
         return Err(CliError::NoCorrespondence {
             path: points.to_path_buf(),
@@ -286,21 +288,7 @@ fn align_to_points(
             minimum: MIN_EXPLAINED_SPREAD,
         });
     }
-    let affine = match affine_between(boundary.points(), q) {
-        Ok(affine) => affine,
-        Err(e) => {
-            let hint = match e {
-                medial_core::Error::Alignment(AlignmentFailure::Reflection { .. }) => {
-                    " (a mesh without correspondence goes in --surface)"
-                }
-                _ => "",
-            };
-            tracing::warn!("no initial affine map, the similarity alone: {e}{hint}");
-            similarity
-        }
-    };
-    let rms = |m: &Matrix4<f64>| {
-        let moved = carry_points(boundary.points(), m);
+    let rms = |moved: &[Vec3]| {
         let sum: f64 = moved
             .iter()
             .zip(q)
@@ -308,20 +296,28 @@ fn align_to_points(
             .sum();
         (sum / q.len() as f64).sqrt()
     };
-    let (rms_similarity, rms_affine) = (rms(&similarity), rms(&affine));
-    if anisotropy(&affine) <= AFFINE_ANISOTROPY {
+    let rms_similarity = rms(&by_similarity);
+    let affine = match affine_between(boundary.points(), q) {
+        Ok(affine) => Some(affine).filter(|a| anisotropy(a) > AFFINE_ANISOTROPY),
+        Err(e) => {
+            tracing::warn!("no initial affine map, the similarity alone: {e}");
+            None
+        }
+    };
+    let Some(affine) = affine else {
         tracing::info!(
             "initial similarity: rms distance {rms_similarity:.3} mm, {:.1} % of the points' \
              spread explained",
             100.0 * explained
         );
         return Ok(similarity);
-    }
+    };
     tracing::info!(
         "initial affine: anisotropy {:.1} %, rms distance {rms_similarity:.3} mm (similarity, \
-         {:.1} % of the points' spread explained) → {rms_affine:.3} mm",
+         {:.1} % of the points' spread explained) → {:.3} mm",
         100.0 * anisotropy(&affine),
-        100.0 * explained
+        100.0 * explained,
+        rms(&carry_points(boundary.points(), &affine))
     );
     Ok(affine)
 }

@@ -293,15 +293,15 @@ pub fn explained_spread(moved: &[Vec3], q: &[Vec3]) -> f64 {
 /// Why no map between two sets of corresponding points was found.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum AlignmentFailure {
-    /// The template's points lie (nearly) in a plane: their covariance is singular and no
+    /// The points to be mapped lie (nearly) in a plane: their covariance is singular and no
     /// affine map is determined.
-    #[error("the template's points are (nearly) coplanar: no affine map between the points")]
+    #[error("the points to be mapped are (nearly) coplanar: no affine map between the point sets")]
     Coplanar,
     /// The least-squares affine map turns space inside out (`det A ≤ 0`), which happens when
     /// the points do not correspond in order: pairs of unrelated points pull `A` towards 0.
     #[error(
         "the least-squares affine map between the points reflects (determinant {determinant:.3}): \
-         the points do not seem to correspond to the template boundary's, point for point"
+         the two point sets do not seem to correspond, point for point"
     )]
     Reflection {
         /// `det A`.
