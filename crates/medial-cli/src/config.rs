@@ -1,8 +1,18 @@
-//! The TOML schedule of `medial fit`: model, flow and stages. Unknown keys are refused by name;
-//! relative paths are relative to the config file.
+//! The TOML config of `medial fit`: a serde view of the engine's [`FitSpec`] (model, flow and
+//! stages) with the files each stage fits to. Unknown keys are refused by name; relative paths
+//! are relative to the config file. [`StageConfig::spec`] and [`StageConfig::of_spec`] are the
+//! one conversion between the flat `[[stage]]` table and the typed [`StageSpec`].
 
 use crate::error::CliError;
-use medial_core::flow::kernel::MAX_TOLERANCE;
+use medial_core::attachment::varifold::Kind;
+use medial_core::fit::augmented_lagrangian::{CoarseTime, MuUpdate, Settle};
+use medial_core::fit::optimize::{LbfgsOptions, ProgressRule};
+use medial_core::fit::spec::{kind_name, kind_of_name};
+use medial_core::fit::{
+    AttachmentSpec, DiceSpec, FitSpec, FlowSettings, MedialTolerance, StageSpec, VarifoldSpec,
+};
+use medial_core::model::constraints::ConstraintUnits;
+use medial_io::affine::Convention;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -14,7 +24,7 @@ pub struct Config {
     pub model: ModelConfig,
     /// `[flow]`.
     #[serde(default)]
-    pub flow: FlowConfig,
+    pub flow: FlowSettings,
     /// `[output]`.
     #[serde(default)]
     pub output: OutputConfig,
@@ -29,32 +39,6 @@ pub struct Config {
 pub struct ModelConfig {
     /// The template: a cmrep medial template, or a plain triangle mesh or point set (VTK).
     pub template: PathBuf,
-}
-
-/// `[flow]`.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct FlowConfig {
-    /// Kernel width σ, in the unit of the coordinates (mm).
-    pub sigma: f64,
-    /// Number of time steps N.
-    pub time_steps: usize,
-    /// Weight of the kinetic energy.
-    pub kinetic_weight: f64,
-    /// Kernel tolerance ε: the sums skip landmark pairs whose kernel value is below it
-    /// (0: exact; at most `medial_core::flow::kernel::MAX_TOLERANCE`).
-    pub kernel_tolerance: f64,
-}
-
-impl Default for FlowConfig {
-    fn default() -> Self {
-        Self {
-            sigma: 2.0,
-            time_steps: 40,
-            kinetic_weight: 0.05,
-            kernel_tolerance: 0.0,
-        }
-    }
 }
 
 /// `[output]`.
@@ -99,53 +83,6 @@ impl AttachmentKind {
     }
 }
 
-/// When μ grows between augmented-Lagrangian iterations.
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum MuUpdateConfig {
-    /// After every AL iteration.
-    #[default]
-    Always,
-    /// Only when max |C| did not halve.
-    IfNotHalved,
-}
-
-/// The unit of the medial constraints (see `medial_core::model::constraints::ConstraintUnits`).
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum ConstraintUnitsConfig {
-    /// mm², as SPEC §3 and the reference implementation (the paper's μ values carry over).
-    Absolute,
-    /// Divided by the template's spoke and tangent lengths: dimensionless, every spoke weighs
-    /// alike (the default; on cmrep's t001 μ needs about 20× its value in mm²).
-    #[default]
-    Relative,
-}
-
-/// The coordinates of a plain matrix file (see `medial_io::affine::Convention`).
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum TransformConventionConfig {
-    /// RAS+ (NIfTI, greedy).
-    Ras,
-    /// LPS+ (ITK, ANTs).
-    Lps,
-}
-
-/// The kind of a varifold stage's surface distance (see
-/// `medial_core::attachment::varifold::Kind`).
-#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum VarifoldKindConfig {
-    /// Unoriented varifold: blind to the orientation of the triangles.
-    #[default]
-    Varifold,
-    /// Oriented varifold (normal kernel width 1).
-    Oriented,
-    /// Current: oriented, linear in the normals.
-    Current,
-}
-
 /// `[[stage]]`.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -165,7 +102,7 @@ pub struct StageConfig {
     /// SSD with `transform`: the coordinates of a plain matrix file, `"ras"` (default; NIfTI,
     /// greedy) or `"lps"` (ITK, ANTs). ITK transform files are always read as LPS.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub transform_convention: Option<TransformConventionConfig>,
+    pub transform_convention: Option<Convention>,
     /// SSD with `transform`: the file maps subject → template (ITK's and greedy's fixed →
     /// moving, with the template registered as the moving image): invert it.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -178,8 +115,8 @@ pub struct StageConfig {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub surface: Option<PathBuf>,
     /// Varifold: `"varifold"` (unoriented), `"oriented"` or `"current"`.
-    #[serde(default)]
-    pub varifold_kind: VarifoldKindConfig,
+    #[serde(default, with = "varifold_kind")]
+    pub varifold_kind: Kind,
     /// Varifold: the spatial kernel width σ_w, mm (default: from the target surface).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub varifold_width: Option<f64>,
@@ -218,10 +155,10 @@ pub struct StageConfig {
     pub mu_max: f64,
     /// When μ grows.
     #[serde(default)]
-    pub mu_update: MuUpdateConfig,
-    /// Unit of the medial constraints in the penalty.
-    #[serde(default)]
-    pub constraint_units: ConstraintUnitsConfig,
+    pub mu_update: MuUpdate,
+    /// Unit of the medial constraints in the penalty (default: relative).
+    #[serde(default = "defaults::constraint_units")]
+    pub constraint_units: ConstraintUnits,
     /// Augmented-Lagrangian iterations.
     #[serde(default = "defaults::al_iterations")]
     pub al_iterations: usize,
@@ -276,42 +213,49 @@ pub struct StageConfig {
     pub tolerance_pct: f64,
 }
 
-/// Largest `image_refine`: each voxel becomes `image_refine³`.
-const MAX_IMAGE_REFINE: usize = 8;
-
+/// The defaults of the keys: those of [`StageSpec::new`] and [`DiceSpec::default`]; the
+/// progress and settle rules' values where the rule is off.
 mod defaults {
+    use super::*;
+
+    fn stage() -> StageSpec {
+        StageSpec::new("", AttachmentSpec::Ssd)
+    }
+    pub fn constraint_units() -> ConstraintUnits {
+        stage().constraint_units
+    }
     pub fn image_sigma() -> f64 {
-        0.2
+        DiceSpec::default().image_sigma
     }
     pub fn image_refine() -> usize {
-        1
+        DiceSpec::default().image_refine
     }
     pub fn subdivision() -> usize {
-        2
+        DiceSpec::default().subdivision
     }
     pub fn layers() -> usize {
-        5
+        DiceSpec::default().layers
     }
     pub fn mu() -> f64 {
-        1.0
+        stage().schedule.mu
     }
     pub fn mu_factor() -> f64 {
-        10.0
+        stage().schedule.mu_factor
     }
     pub fn mu_max() -> f64 {
-        1e6
+        stage().schedule.mu_max
     }
     pub fn al_iterations() -> usize {
-        1
+        stage().schedule.iterations
     }
     pub fn max_iterations() -> usize {
-        1000
+        stage().lbfgs.max_iterations
     }
     pub fn gradient_tolerance() -> f64 {
-        1e-6
+        stage().lbfgs.gradient_tolerance
     }
     pub fn relative_decrease() -> f64 {
-        1e-9
+        stage().lbfgs.relative_decrease
     }
     pub fn progress_decrease() -> f64 {
         0.01
@@ -320,80 +264,291 @@ mod defaults {
         1e-3
     }
     pub fn lbfgs_memory() -> usize {
-        10
+        stage().lbfgs.memory
     }
     pub fn tolerance_deg() -> f64 {
-        1.0
+        stage().tolerance.angle_deg
     }
     pub fn tolerance_pct() -> f64 {
-        1.0
+        stage().tolerance.mismatch_pct
     }
 }
 
-impl StageConfig {
-    /// A stage named `name` with `attachment` and every other setting at its default (no
-    /// target, transform or image yet).
-    pub fn new(name: &str, attachment: AttachmentKind) -> Self {
-        Self {
-            name: name.into(),
-            attachment,
-            target: None,
-            transform: None,
-            transform_convention: None,
-            transform_invert: None,
-            image: None,
-            surface: None,
-            varifold_kind: VarifoldKindConfig::default(),
-            varifold_width: None,
-            label: None,
-            weight: None,
-            image_sigma: defaults::image_sigma(),
-            image_refine: defaults::image_refine(),
-            subdivision: defaults::subdivision(),
-            layers: defaults::layers(),
-            constraints: None,
-            mu: defaults::mu(),
-            mu_factor: defaults::mu_factor(),
-            mu_max: defaults::mu_max(),
-            mu_update: MuUpdateConfig::default(),
-            constraint_units: ConstraintUnitsConfig::default(),
-            al_iterations: defaults::al_iterations(),
-            max_iterations: defaults::max_iterations(),
-            first_iterations: None,
-            settle_constraint: None,
-            coarse_time_steps: None,
-            coarse_al_iterations: None,
-            settle_data_change: defaults::settle_data_change(),
-            gradient_tolerance: defaults::gradient_tolerance(),
-            relative_decrease: defaults::relative_decrease(),
-            progress_window: 0,
-            progress_decrease: defaults::progress_decrease(),
-            lbfgs_memory: defaults::lbfgs_memory(),
-            tolerance_deg: defaults::tolerance_deg(),
-            tolerance_pct: defaults::tolerance_pct(),
-        }
+/// `varifold_kind` as its config name ([`kind_name`]).
+mod varifold_kind {
+    use super::*;
+
+    pub fn serialize<S: serde::Serializer>(kind: &Kind, s: S) -> Result<S::Ok, S::Error> {
+        let name = kind_name(*kind).ok_or_else(|| {
+            serde::ser::Error::custom("an oriented varifold of another normal width has no name")
+        })?;
+        s.serialize_str(name)
     }
 
-    /// The AL iterations in coarse time steps, when the stage has them: `coarse_al_iterations`,
-    /// by default all but the last.
-    pub fn coarse_al_iterations(&self) -> Option<usize> {
-        self.coarse_time_steps?;
-        Some(
-            self.coarse_al_iterations
-                .unwrap_or(self.al_iterations.saturating_sub(1)),
-        )
-    }
-
-    /// The data weight, with the default of the attachment.
-    pub fn data_weight(&self) -> f64 {
-        self.weight.unwrap_or(match self.attachment {
-            AttachmentKind::Ssd => 1.0,
-            AttachmentKind::Dice | AttachmentKind::Varifold => 100.0,
+    pub fn deserialize<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Kind, D::Error> {
+        let name = String::deserialize(d)?;
+        kind_of_name(&name).ok_or_else(|| {
+            serde::de::Error::custom(format!(
+                "unknown varifold_kind `{name}`, expected one of `varifold`, `oriented`, `current`"
+            ))
         })
     }
 }
 
+/// The data a stage fits to, as files: what [`StageConfig::of_spec`] writes beside the settings.
+#[derive(Clone, Debug)]
+pub enum Source {
+    /// SSD: points in correspondence with the template boundary's.
+    Target(PathBuf),
+    /// SSD: an affine map (RAS) that carries the template boundary to its targets.
+    Transform(PathBuf),
+    /// Dice: an image and its foreground label (none: every voxel > 0).
+    Image(PathBuf, Option<f64>),
+    /// Varifold: a surface.
+    Surface(PathBuf),
+}
+
+impl StageConfig {
+    /// The config view of `spec` fitting to `source`.
+    pub fn of_spec(spec: &StageSpec, source: Source) -> Self {
+        let (attachment, dice, varifold) = match &spec.attachment {
+            AttachmentSpec::Ssd => (AttachmentKind::Ssd, DiceSpec::default(), None),
+            AttachmentSpec::Dice(d) => (AttachmentKind::Dice, *d, None),
+            AttachmentSpec::Varifold(v) => {
+                (AttachmentKind::Varifold, DiceSpec::default(), Some(*v))
+            }
+        };
+        let (mut target, mut transform, mut image, mut label, mut surface) =
+            (None, None, None, None, None);
+        match source {
+            Source::Target(p) => target = Some(p),
+            Source::Transform(p) => transform = Some(p),
+            Source::Image(p, l) => (image, label) = (Some(p), l),
+            Source::Surface(p) => surface = Some(p),
+        }
+        let s = &spec.schedule;
+        let l = &spec.lbfgs;
+        Self {
+            name: spec.name.clone(),
+            attachment,
+            target,
+            transform,
+            transform_convention: None,
+            transform_invert: None,
+            image,
+            surface,
+            varifold_kind: varifold.map_or(Kind::default(), |v| v.kind),
+            varifold_width: varifold.and_then(|v| v.width),
+            label,
+            weight: spec.weight,
+            image_sigma: dice.image_sigma,
+            image_refine: dice.image_refine,
+            subdivision: dice.subdivision,
+            layers: dice.layers,
+            constraints: spec.constraints,
+            mu: s.mu,
+            mu_factor: s.mu_factor,
+            mu_max: s.mu_max,
+            mu_update: s.mu_update,
+            constraint_units: spec.constraint_units,
+            al_iterations: s.iterations,
+            max_iterations: l.max_iterations,
+            first_iterations: s.first_iterations,
+            settle_constraint: s.settle.map(|t| t.max_abs_constraint),
+            coarse_time_steps: s.coarse.map(|c| c.time_steps),
+            coarse_al_iterations: s.coarse.map(|c| c.al_iterations),
+            settle_data_change: s
+                .settle
+                .map_or_else(defaults::settle_data_change, |t| t.data_change),
+            gradient_tolerance: l.gradient_tolerance,
+            relative_decrease: l.relative_decrease,
+            progress_window: l.progress.map_or(0, |p| p.window),
+            progress_decrease: l
+                .progress
+                .map_or_else(defaults::progress_decrease, |p| p.decrease),
+            lbfgs_memory: l.memory,
+            tolerance_deg: spec.tolerance.angle_deg,
+            tolerance_pct: spec.tolerance.mismatch_pct,
+        }
+    }
+
+    /// The engine's description of this stage.
+    pub fn spec(&self) -> StageSpec {
+        let attachment = match self.attachment {
+            AttachmentKind::Ssd => AttachmentSpec::Ssd,
+            AttachmentKind::Dice => AttachmentSpec::Dice(DiceSpec {
+                image_sigma: self.image_sigma,
+                image_refine: self.image_refine,
+                subdivision: self.subdivision,
+                layers: self.layers,
+            }),
+            AttachmentKind::Varifold => AttachmentSpec::Varifold(VarifoldSpec {
+                kind: self.varifold_kind,
+                width: self.varifold_width,
+            }),
+        };
+        StageSpec {
+            name: self.name.clone(),
+            attachment,
+            weight: self.weight,
+            constraints: self.constraints,
+            constraint_units: self.constraint_units,
+            schedule: medial_core::fit::AlSchedule {
+                mu: self.mu,
+                mu_factor: self.mu_factor,
+                mu_max: self.mu_max,
+                iterations: self.al_iterations,
+                mu_update: self.mu_update,
+                first_iterations: self.first_iterations,
+                settle: self.settle_constraint.map(|max_abs_constraint| Settle {
+                    max_abs_constraint,
+                    data_change: self.settle_data_change,
+                }),
+                coarse: self.coarse_time_steps.map(|time_steps| CoarseTime {
+                    time_steps,
+                    al_iterations: self
+                        .coarse_al_iterations
+                        .unwrap_or(self.al_iterations.saturating_sub(1)),
+                }),
+            },
+            lbfgs: LbfgsOptions {
+                max_iterations: self.max_iterations,
+                memory: self.lbfgs_memory,
+                gradient_tolerance: self.gradient_tolerance,
+                relative_decrease: self.relative_decrease,
+                progress: (self.progress_window > 0).then_some(ProgressRule {
+                    window: self.progress_window,
+                    decrease: self.progress_decrease,
+                }),
+            },
+            tolerance: MedialTolerance {
+                angle_deg: self.tolerance_deg,
+                mismatch_pct: self.tolerance_pct,
+            },
+        }
+    }
+
+    /// The data weight, with the default of the attachment ([`StageSpec::data_weight`]).
+    pub fn data_weight(&self) -> f64 {
+        self.spec().data_weight()
+    }
+
+    /// The data source of the stage: its file and how to read it.
+    pub fn source(&self) -> Result<Source, String> {
+        let missing = |what: &str| format!("stage '{}': {what}", self.name);
+        Ok(match self.attachment {
+            AttachmentKind::Ssd => match (&self.target, &self.transform) {
+                (Some(t), None) => Source::Target(t.clone()),
+                (None, Some(t)) => Source::Transform(t.clone()),
+                (Some(_), Some(_)) => {
+                    return Err(missing("give either target or transform, not both"))
+                }
+                (None, None) => {
+                    return Err(missing(
+                        "an ssd stage needs target (a mesh) or transform (a 4×4 matrix file)",
+                    ))
+                }
+            },
+            AttachmentKind::Dice => Source::Image(
+                self.image
+                    .clone()
+                    .ok_or_else(|| missing("a dice stage needs image"))?,
+                self.label,
+            ),
+            AttachmentKind::Varifold => Source::Surface(
+                self.surface
+                    .clone()
+                    .ok_or_else(|| missing("a varifold stage needs surface (a triangle mesh)"))?,
+            ),
+        })
+    }
+
+    /// Checks that every key given applies to the stage's attachment and that it has its data;
+    /// the values are checked by [`FitSpec::check`].
+    fn check_keys(&self) -> Result<(), String> {
+        use AttachmentKind::{Dice, Ssd, Varifold};
+        let keys = [
+            ("target", self.target.is_some(), Ssd),
+            ("transform", self.transform.is_some(), Ssd),
+            ("image", self.image.is_some(), Dice),
+            ("label", self.label.is_some(), Dice),
+            ("surface", self.surface.is_some(), Varifold),
+            ("varifold_width", self.varifold_width.is_some(), Varifold),
+        ];
+        if let Some((key, _, _)) = keys
+            .iter()
+            .find(|(_, given, owner)| *given && *owner != self.attachment)
+        {
+            return Err(format!(
+                "stage '{}': {key} does not apply to attachment = \"{}\"",
+                self.name,
+                self.attachment.name()
+            ));
+        }
+        let transform_keys = [
+            ("transform_convention", self.transform_convention.is_some()),
+            ("transform_invert", self.transform_invert.is_some()),
+        ];
+        if let Some((key, _)) = transform_keys
+            .iter()
+            .find(|(_, given)| *given && self.transform.is_none())
+        {
+            return Err(format!("stage '{}': {key} needs transform", self.name));
+        }
+        if self.image_refine > 1 && self.label.is_some() {
+            return Err(format!(
+                "stage '{}': image_refine interpolates intensities: it does not apply to a label",
+                self.name
+            ));
+        }
+        // Kept in the file even where their rule is off: checked here, not by the engine.
+        for (key, value) in [
+            ("progress_decrease", self.progress_decrease),
+            ("settle_data_change", self.settle_data_change),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(format!(
+                    "stage '{}': {key} must be a non-negative number, got {value}",
+                    self.name
+                ));
+            }
+        }
+        if let Some(a) = self.coarse_al_iterations {
+            if self.coarse_time_steps.is_none() {
+                return Err(format!(
+                    "stage '{}': coarse_al_iterations ({a}) needs coarse_time_steps",
+                    self.name
+                ));
+            }
+        }
+        self.source().map(|_| ())
+    }
+}
+
 impl Config {
+    /// The config of `spec` for `template`, each stage fitting to its source.
+    pub fn of_spec(spec: &FitSpec, template: PathBuf, sources: Vec<Source>) -> Self {
+        Self {
+            model: ModelConfig { template },
+            flow: spec.flow,
+            output: OutputConfig::default(),
+            stages: spec
+                .stages
+                .iter()
+                .zip(sources)
+                .map(|(stage, source)| StageConfig::of_spec(stage, source))
+                .collect(),
+        }
+    }
+
+    /// The engine's description of the fit.
+    pub fn spec(&self) -> FitSpec {
+        FitSpec {
+            flow: self.flow,
+            stages: self.stages.iter().map(StageConfig::spec).collect(),
+        }
+    }
+
     /// Reads, parses, resolves paths against the file's folder and checks the config.
     pub fn load(path: &Path) -> Result<Self, CliError> {
         let text = std::fs::read_to_string(path).map_err(|e| CliError::io(path, e))?;
@@ -435,48 +590,13 @@ impl Config {
         }
     }
 
-    /// Checks the values that TOML types cannot (positive σ, known stage names, …): the
-    /// message names the key.
+    /// Checks the keys of each stage ([`StageConfig::check_keys`]) and the values
+    /// ([`FitSpec::check`]): the message names the key.
     pub fn check(&self) -> Result<(), String> {
-        let f = &self.flow;
-        positive("flow.sigma", f.sigma)?;
-        non_negative("flow.kinetic_weight", f.kinetic_weight)?;
-        if !(0.0..=MAX_TOLERANCE).contains(&f.kernel_tolerance) {
-            return Err(format!(
-                "flow.kernel_tolerance must be in [0, {MAX_TOLERANCE}], got {}",
-                f.kernel_tolerance
-            ));
-        }
-        if f.time_steps == 0 {
-            return Err("flow.time_steps must be at least 1".into());
-        }
-        if self.stages.is_empty() {
-            return Err("the config has no [[stage]]".into());
-        }
-        let mut names = std::collections::HashSet::new();
         for s in &self.stages {
-            if !names.insert(&s.name) {
-                return Err(format!("two stages are named '{}'", s.name));
-            }
-            s.check().map_err(|e| format!("stage '{}': {e}", s.name))?;
-            if let Some(c) = s.coarse_time_steps {
-                if c == 0 || c >= f.time_steps || f.time_steps % c != 0 {
-                    return Err(format!(
-                        "stage '{}': coarse_time_steps ({c}) must divide flow.time_steps ({}) and be below it",
-                        s.name, f.time_steps
-                    ));
-                }
-            }
-            if let Some(a) = s.coarse_al_iterations() {
-                if a == 0 || a >= s.al_iterations {
-                    return Err(format!(
-                        "stage '{}': coarse_al_iterations ({a}) must be at least 1 and below al_iterations ({}): the last AL iteration runs in flow.time_steps",
-                        s.name, s.al_iterations
-                    ));
-                }
-            }
+            s.check_keys()?;
         }
-        Ok(())
+        self.spec().check_text()
     }
 
     /// The config as TOML text after the comment lines `header`, every setting written out (paths
@@ -489,105 +609,6 @@ impl Config {
     /// The stage called `name`.
     pub fn stage(&self, name: &str) -> Option<&StageConfig> {
         self.stages.iter().find(|s| s.name == name)
-    }
-}
-
-impl StageConfig {
-    fn check(&self) -> Result<(), String> {
-        use AttachmentKind::{Dice, Ssd, Varifold};
-        let keys = [
-            ("target", self.target.is_some(), Ssd),
-            ("transform", self.transform.is_some(), Ssd),
-            ("image", self.image.is_some(), Dice),
-            ("label", self.label.is_some(), Dice),
-            ("surface", self.surface.is_some(), Varifold),
-            ("varifold_width", self.varifold_width.is_some(), Varifold),
-        ];
-        if let Some((key, _, _)) = keys
-            .iter()
-            .find(|(_, given, owner)| *given && *owner != self.attachment)
-        {
-            return Err(format!(
-                "{key} does not apply to attachment = \"{}\"",
-                self.attachment.name()
-            ));
-        }
-        let transform_keys = [
-            ("transform_convention", self.transform_convention.is_some()),
-            ("transform_invert", self.transform_invert.is_some()),
-        ];
-        if let Some((key, _)) = transform_keys
-            .iter()
-            .find(|(_, given)| *given && self.transform.is_none())
-        {
-            return Err(format!("{key} needs transform"));
-        }
-        match self.attachment {
-            AttachmentKind::Ssd => match (&self.target, &self.transform) {
-                (Some(_), Some(_)) => {
-                    return Err("give either target or transform, not both".into())
-                }
-                (None, None) => {
-                    return Err(
-                        "an ssd stage needs target (a mesh) or transform (a 4×4 matrix file)"
-                            .into(),
-                    )
-                }
-                _ => {}
-            },
-            AttachmentKind::Dice => {
-                if self.image.is_none() {
-                    return Err("a dice stage needs image".into());
-                }
-                non_negative("image_sigma", self.image_sigma)?;
-                if self.layers == 0 {
-                    return Err("layers must be at least 1".into());
-                }
-                if !(1..=MAX_IMAGE_REFINE).contains(&self.image_refine) {
-                    return Err(format!(
-                        "image_refine must be 1 … {MAX_IMAGE_REFINE}, got {}",
-                        self.image_refine
-                    ));
-                }
-                if self.image_refine > 1 && self.label.is_some() {
-                    return Err(
-                        "image_refine interpolates intensities: it does not apply to a label"
-                            .into(),
-                    );
-                }
-            }
-            AttachmentKind::Varifold => {
-                if self.surface.is_none() {
-                    return Err("a varifold stage needs surface (a triangle mesh)".into());
-                }
-                if let Some(w) = self.varifold_width {
-                    positive("varifold_width", w)?;
-                }
-            }
-        }
-        non_negative("weight", self.data_weight())?;
-        positive("mu", self.mu)?;
-        if !(self.mu_factor >= 1.0 && self.mu_factor.is_finite()) {
-            return Err(format!("mu_factor must be ≥ 1, got {}", self.mu_factor));
-        }
-        if self.mu_max < self.mu {
-            return Err(format!(
-                "mu_max ({}) is below mu ({})",
-                self.mu_max, self.mu
-            ));
-        }
-        if self.al_iterations == 0 || self.lbfgs_memory == 0 {
-            return Err("al_iterations and lbfgs_memory must be at least 1".into());
-        }
-        positive("tolerance_deg", self.tolerance_deg)?;
-        positive("tolerance_pct", self.tolerance_pct)?;
-        non_negative("gradient_tolerance", self.gradient_tolerance)?;
-        non_negative("relative_decrease", self.relative_decrease)?;
-        if let Some(c) = self.settle_constraint {
-            non_negative("settle_constraint", c)?;
-        }
-        non_negative("settle_data_change", self.settle_data_change)?;
-        non_negative("progress_decrease", self.progress_decrease)
     }
 }
 
@@ -611,22 +632,6 @@ fn toml_error(text: &str, e: &toml::de::Error) -> String {
             format!("line {line}, column {column}: {message}")
         }
         None => message,
-    }
-}
-
-fn positive(name: &str, v: f64) -> Result<(), String> {
-    if v.is_finite() && v > 0.0 {
-        Ok(())
-    } else {
-        Err(format!("{name} must be a positive number, got {v}"))
-    }
-}
-
-fn non_negative(name: &str, v: f64) -> Result<(), String> {
-    if v.is_finite() && v >= 0.0 {
-        Ok(())
-    } else {
-        Err(format!("{name} must be a non-negative number, got {v}"))
     }
 }
 

@@ -1,7 +1,6 @@
 //! The one error type of the command-line tool. Every message says what went wrong and where;
 //! `main` prints it and exits with a non-zero code.
 
-use crate::memory::{self, Estimate};
 use crate::signals::Signal;
 use medial_core::mesh::Bounds;
 use std::path::{Path, PathBuf};
@@ -12,9 +11,9 @@ pub enum CliError {
     /// A file could not be read or written.
     #[error(transparent)]
     File(#[from] medial_io::Error),
-    /// The engine refused the input or failed.
+    /// The engine refused the input or failed (its memory refusals become [`CliError::Memory`]).
     #[error(transparent)]
-    Engine(#[from] medial_core::Error),
+    Engine(medial_core::Error),
     /// The config file is invalid.
     #[error("{}: {message}", path.display())]
     Config {
@@ -71,13 +70,13 @@ pub enum CliError {
     #[error(
         "{what} would need {estimate}, more than the memory limit of {} (--max-memory GIB; \
          default: the machine's total memory)",
-        memory::human(*limit)
+        medial_core::memory::human(*limit)
     )]
     Memory {
         /// What would need it.
         what: String,
         /// The estimate.
-        estimate: Estimate,
+        estimate: String,
         /// The limit, bytes.
         limit: f64,
     },
@@ -88,8 +87,8 @@ pub enum CliError {
          mm, the template's boundary {} mm (world coordinates); check the image's origin and \
          orientation against the template's coordinates",
         image.display(),
-        span(foreground),
-        span(template)
+        foreground.span(),
+        template.span()
     )]
     NoOverlap {
         /// The stage.
@@ -210,8 +209,20 @@ impl CliError {
     }
 }
 
-/// A bounding box as `[x0, x1] × [y0, y1] × [z0, z1]`.
-fn span(b: &Bounds) -> String {
-    let axis = |a: usize| format!("[{:.1}, {:.1}]", b.min[a], b.max[a]);
-    format!("{} × {} × {}", axis(0), axis(1), axis(2))
+impl From<medial_core::Error> for CliError {
+    /// The engine's error, its memory refusals with the command line's `--max-memory` hint.
+    fn from(e: medial_core::Error) -> Self {
+        match e {
+            medial_core::Error::Memory {
+                what,
+                estimate,
+                limit,
+            } => CliError::Memory {
+                what,
+                estimate,
+                limit,
+            },
+            e => CliError::Engine(e),
+        }
+    }
 }

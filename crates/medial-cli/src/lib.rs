@@ -15,7 +15,6 @@ pub mod config;
 mod error;
 mod memory;
 mod output;
-mod plan;
 mod progress;
 mod report;
 mod results;

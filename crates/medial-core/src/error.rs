@@ -1,6 +1,7 @@
 //! The one error type of the engine.
 
 use crate::mesh::topology::MeshDefect;
+use crate::mesh::Bounds;
 
 /// Everything that can go wrong inside the engine. Messages say what and where, so that the
 /// command-line tool can print them as they are.
@@ -57,6 +58,77 @@ pub enum Error {
     /// No initial map between corresponding point sets ([`crate::fit::align::AlignmentFailure`]).
     #[error("{0}")]
     Alignment(#[from] crate::fit::align::AlignmentFailure),
+    /// A run would need more memory than its limit ([`crate::memory`]).
+    #[error("{what} would need {estimate}, more than the memory limit of {}", crate::memory::human(*limit))]
+    Memory {
+        /// What would need it.
+        what: String,
+        /// The estimate, in words ([`crate::memory::Estimate`]'s display).
+        estimate: String,
+        /// The limit, bytes.
+        limit: f64,
+    },
+    /// A stage's attachment does not take this kind of target ([`crate::fit::Target`]).
+    #[error("the {attachment} attachment cannot fit {target}")]
+    WrongTarget {
+        /// The attachment's name.
+        attachment: &'static str,
+        /// The target's kind ([`crate::fit::Target::kind`]).
+        target: &'static str,
+    },
+    /// What needs a medial template (constraints, Dice sampling) got a plain mesh.
+    #[error("{0} needs a medial template (a VTK file with a MedialIndex array)")]
+    NeedsMedial(&'static str),
+    /// SSD targets that are not one per boundary point.
+    #[error(
+        "the target has {found} points but the template boundary has {expected}; an SSD \
+         target needs the same points in the same order"
+    )]
+    PointCount {
+        /// Boundary points of the template.
+        expected: usize,
+        /// Target points.
+        found: usize,
+    },
+    /// An image's foreground and a template's interior do not overlap at all: no gradient
+    /// could bring them together.
+    #[error(
+        "the image does not overlap the template: its foreground spans {} mm, the template's \
+         boundary {} mm (world coordinates); check the image's origin and orientation against \
+         the template's coordinates",
+        foreground.span(),
+        template.span()
+    )]
+    NoOverlap {
+        /// The foreground's bounds, mm.
+        foreground: Box<Bounds>,
+        /// The template boundary's bounds, mm.
+        template: Box<Bounds>,
+    },
+    /// Target points that do not correspond to the template boundary's, one for one: the
+    /// least-squares similarity explains too little of their spread
+    /// ([`crate::fit::initial::MIN_EXPLAINED_SPREAD`]).
+    #[error(
+        "the points do not seem to correspond to the template boundary's, point for point: the \
+         best similarity between them accounts for {:.0} % of the points' spread (at least {:.0} \
+         % expected)",
+        100.0 * explained,
+        100.0 * minimum
+    )]
+    NoCorrespondence {
+        /// The fraction explained.
+        explained: f64,
+        /// The least fraction accepted.
+        minimum: f64,
+    },
+    /// A setting that cannot be used, with the engine's reason.
+    #[error("{setting}: {source}")]
+    Setting {
+        /// The setting's name.
+        setting: &'static str,
+        /// Why.
+        source: Box<Error>,
+    },
     /// The optimiser failed (not merely stopped early).
     #[error("optimisation failed: {0}")]
     Optimisation(String),

@@ -38,6 +38,7 @@ pub mod error;
 pub mod fit;
 pub mod flow;
 pub mod image;
+pub mod memory;
 pub mod mesh;
 pub mod model;
 pub mod synth;

@@ -44,8 +44,9 @@ fn has_affine_last_row(m: &Matrix4<f64>) -> bool {
     m.row(3) == RowVector4::new(0.0, 0.0, 0.0, 1.0)
 }
 
-/// The coordinates a plain 4×4 matrix file is written in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+/// The coordinates a plain 4×4 matrix file is written in (in a config: `ras`, `lps`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Convention {
     /// RAS+ world coordinates (NIfTI's, greedy's): read as is.
     #[default]

@@ -7,7 +7,7 @@
 //! fit starts.
 
 use super::RESERVED;
-use crate::commands::fit::Inputs;
+use crate::commands::fit::{Inputs, Resolved};
 use crate::config::{AttachmentKind, Config};
 use crate::error::CliError;
 use std::collections::HashMap;
@@ -43,16 +43,16 @@ impl Subject {
     /// place of the base's, and its transform in place of the base's SSD transforms (see
     /// [`crate::commands::fit::resolve`]); without a base, the automatic schedule, written to
     /// `out`.
-    pub fn config(&self, base: Option<&Path>, out: &Path) -> Result<Config, CliError> {
-        let mut config = crate::commands::fit::resolve(base, &self.inputs, out)?;
+    pub fn config(&self, base: Option<&Path>, out: &Path) -> Result<Resolved, CliError> {
+        let mut resolved = crate::commands::fit::resolve(base, &self.inputs, out)?;
         if let Some(transform) = &self.transform {
-            for stage in &mut config.stages {
+            for stage in &mut resolved.config.stages {
                 if stage.transform.is_some() {
                     stage.transform = Some(transform.clone());
                 }
             }
         }
-        Ok(config)
+        Ok(resolved)
     }
 }
 

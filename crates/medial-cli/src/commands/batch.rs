@@ -179,7 +179,7 @@ fn fit_one(
             return Err(CliError::io(&failed, e));
         }
     }
-    let config = if resume {
+    let resolved = if resume {
         let none = Inputs {
             template: None,
             image: None,
@@ -198,7 +198,7 @@ fn fit_one(
         checkpoint_every: None,
         resume,
     };
-    fit::run(&config, &options).map(|_| ())
+    fit::run(&resolved, &options).map(|_| ())
 }
 
 /// Success, or the error naming the `failed` subjects.

@@ -33,7 +33,7 @@ pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> 
     let model = medial_io::model::read_model(&config.model.template)?;
     let k = model.landmarks().len();
     let flow = flow_of(config, k)?;
-    let prepared = stage::prepare(stage_cfg, &model)?;
+    let prepared = stage::prepare(stage_cfg, &model, stage::read_target(stage_cfg, &model)?)?;
     let steps = flow.time_steps();
     let momenta = read_array(&options.momenta, &[steps, k, 3], "momenta")?;
     let constraints = prepared.constraints.as_ref();
@@ -65,7 +65,7 @@ pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> 
     if let (Some(path), Some(g)) = (&options.gradient, &gradient) {
         medial_io::npy::write_npy(path, &[steps, k, 3], g)?;
     }
-    prepared.end_figures(&model, &evaluation)
+    stage::end_figures(&prepared, &model, &evaluation)
 }
 
 /// Reads a `.npy` array and checks its shape.

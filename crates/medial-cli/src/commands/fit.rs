@@ -2,33 +2,22 @@
 //! for checkpoints and signals, and writes the results as one set.
 
 use crate::checkpoint::{self, Fingerprint, Saved};
-use crate::config::StageConfig;
-use crate::config::{AttachmentKind, Config};
+use crate::config::{AttachmentKind, Config, Source, StageConfig};
 use crate::error::CliError;
 use crate::output::model_error;
 use crate::output::{write_json, write_options, write_text};
-use crate::plan::{plain_sigma, varifold_widths, Geometry, Target};
 use crate::progress::{Log, LogRow, Progress};
-use crate::results::{create_dir, ResultSet};
+use crate::results::ResultSet;
 use crate::signals::{Signal, Signals};
-use crate::stage::{self, flow_of, Prepared};
+use crate::stage::{self, flow_of};
 use crate::summary::{Figures, StageSummary, Status, Summary};
 use crate::time_points::{self, time_points};
-use medial_core::build::project::{project, ConstraintFigures, ProjectOptions};
 use medial_core::fit::{
-    affine_between, align_affine, align_similarity, anisotropy, explained_spread,
-    run_stages_resumable, similarity_between, Checkpoint, ConstraintSet, FitEvent, FitRun, Guard,
-    PlannedStage, Stage, StageOutcome,
+    run_stages_resumable, Checkpoint, FitEvent, FitRun, PlannedStage, PreparedStage,
+    StageOutcome, Target,
 };
 use medial_core::flow::{Flow, Trajectory, STRAIN_LIMIT};
-use medial_core::image::rasterize::{grid_around, rasterize};
-use medial_core::image::Volume;
-use medial_core::mesh::topology::{check_closed_oriented_manifold, check_outward};
-use medial_core::mesh::TriMesh;
-use medial_core::model::MedialTemplate;
-use medial_core::model::{MedialConstraints, Model};
-use medial_core::synth::{boundary_mesh, PrincipalAxes};
-use medial_core::Vec3;
+use medial_core::model::Model;
 use medial_io::model::{boundary_polydata, medial_polydata};
 use medial_io::vtk;
 use nalgebra::Matrix4;
@@ -36,7 +25,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 /// The inputs of `medial fit` given as flags: without a config they choose an automatic
-/// schedule ([`crate::plan::FitPlan::automatic`]); with one they replace its template and
+/// schedule ([`medial_core::fit::plan::automatic`]); with one they replace its template and
 /// targets. Relative paths are relative to the working directory.
 #[derive(clap::Args, Debug)]
 pub struct Inputs {
@@ -78,9 +67,27 @@ impl Inputs {
     }
 }
 
+/// A fit ready to run: its config as `config.toml` names it, and for an automatic fit the
+/// template it starts from, carried by its initial alignment, in memory.
+pub struct Resolved {
+    /// The config (an automatic fit's names its aligned template in the output folder).
+    pub config: Config,
+    /// An automatic fit's start; `None`: the config's template, read from its file.
+    pub start: Option<Start>,
+}
+
+/// Where an automatic fit starts: the template carried by its initial map (written into the
+/// fit's results as `aligned_template.vtk` and `alignment.txt`).
+pub struct Start {
+    /// The aligned template.
+    pub model: Model,
+    /// The initial map, template → subject.
+    pub alignment: Matrix4<f64>,
+}
+
 /// The config of a fit: `config` with the flags of `inputs` in place of its template and
 /// targets, or without one the automatic schedule of `inputs`.
-pub fn resolve(config: Option<&Path>, inputs: &Inputs, out: &Path) -> Result<Config, CliError> {
+pub fn resolve(config: Option<&Path>, inputs: &Inputs, out: &Path) -> Result<Resolved, CliError> {
     if inputs.label.is_some() && inputs.image.is_none() {
         return Err(CliError::Usage("--label needs --image".into()));
     }
@@ -113,64 +120,76 @@ pub fn resolve(config: Option<&Path>, inputs: &Inputs, out: &Path) -> Result<Con
             AttachmentKind::Ssd => {}
         }
     }
-    Ok(config)
+    Ok(Resolved {
+        config,
+        start: None,
+    })
 }
 
-/// The automatic schedule of `--template` against the one target of `inputs`. The template is
-/// first carried by an initial alignment: a similarity (which keeps it medial) by moments and
-/// overlap onto an image (or a closed surface, rasterized) or by least squares onto
-/// corresponding points, then an affine map the same way; none for an open surface. An affine map that is not a similarity
-/// is applied and the template projected back onto its constraints. `out/aligned_template.vtk`
-/// is the template the fit starts from, `out/alignment.txt` the map.
-fn automatic(inputs: &Inputs, out: &Path) -> Result<Config, CliError> {
+/// The automatic fit of `--template` against the one target of `inputs`: the engine's plan and
+/// initial alignment ([`medial_core::fit::run::automatic`]); the config names the aligned
+/// template as `out/aligned_template.vtk`, which the fit writes.
+fn automatic(inputs: &Inputs, out: &Path) -> Result<Resolved, CliError> {
     let template_path = inputs
         .template
         .as_ref()
         .expect("clap requires --template without a config");
-    match medial_io::model::read_model(template_path)? {
-        Model::Medial(template) => automatic_medial(&template, template_path, inputs, out),
-        Model::Plain(mesh) => automatic_plain(&mesh, template_path, inputs, out),
+    let model = medial_io::model::read_model(template_path)?;
+    let (target, source) = read_automatic_target(inputs, &model, template_path)?;
+    let start = medial_core::fit::run::automatic(&model, &target).map_err(|e| match e {
+        medial_core::Error::NoCorrespondence { explained, minimum } => CliError::NoCorrespondence {
+            path: source_path(&source).to_path_buf(),
+            explained,
+            minimum,
+        },
+        e => model_error(source_path(&source), e),
+    })?;
+    for note in &start.notes {
+        tracing::info!("{note}");
     }
+    let template = std::path::absolute(out.join(ALIGNED_TEMPLATE)).map_err(|e| CliError::io(out, e))?;
+    let sources = vec![source; start.spec.stages.len()];
+    Ok(Resolved {
+        config: Config::of_spec(&start.spec, template, sources),
+        start: Some(Start {
+            model: start.model,
+            alignment: start.alignment,
+        }),
+    })
 }
 
-/// The one target of an automatic fit, and its initial map of the template's boundary
-/// `boundary` (see [`automatic`]); `spacing` rasterizes a closed surface.
-fn target_and_alignment(
-    boundary: &TriMesh,
+/// The one target of an automatic fit, read, and its file as a stage's source.
+fn read_automatic_target(
     inputs: &Inputs,
-    spacing: f64,
-) -> Result<(Matrix4<f64>, Target), CliError> {
+    model: &Model,
+    template_path: &Path,
+) -> Result<(Target, Source), CliError> {
     match (&inputs.image, &inputs.target, &inputs.surface) {
         (Some(image), None, None) => {
+            if model.medial().is_none() {
+                return Err(CliError::Input(format!(
+                    "{} is a plain mesh: a Dice fit needs a medial template (a MedialIndex point \
+                     array); fit a plain mesh with --target or --surface",
+                    template_path.display()
+                )));
+            }
             let volume = medial_io::volume::read_volume(image)?;
-            let mask = volume.foreground(inputs.label);
-            let target = Target::Image {
-                path: image.clone(),
-                label: inputs.label,
-                voxel_mm: mask.spacing().min(),
-                graded_signed: volume.is_graded_signed(),
-            };
-            drop(volume);
-            Ok((align_to_image(boundary, &mask, image)?, target))
-        }
-        (None, Some(points), None) => {
-            let q = medial_io::mesh::read_points(points)?;
             Ok((
-                align_to_points(boundary, &q, points)?,
-                Target::Points(points.clone()),
+                Target::Image {
+                    volume,
+                    label: inputs.label,
+                },
+                Source::Image(image.clone(), inputs.label),
             ))
         }
-        (None, None, Some(surface)) => {
-            let mesh = medial_io::mesh::read_mesh(surface)?;
-            let (width, fine_width) =
-                varifold_widths(boundary, &mesh).map_err(|e| model_error(surface, e))?;
-            let target = Target::Surface {
-                path: surface.clone(),
-                width,
-                fine_width,
-            };
-            Ok((align_to_surface(boundary, &mesh, surface, spacing)?, target))
-        }
+        (None, Some(points), None) => Ok((
+            Target::Points(medial_io::mesh::read_points(points)?),
+            Source::Target(points.clone()),
+        )),
+        (None, None, Some(surface)) => Ok((
+            Target::Surface(medial_io::mesh::read_mesh(surface)?),
+            Source::Surface(surface.clone()),
+        )),
         _ => Err(CliError::Input(
             "without a config, medial fit needs --template and one of --image, --target, \
              --surface"
@@ -179,239 +198,11 @@ fn target_and_alignment(
     }
 }
 
-/// [`automatic`] for a medial template.
-fn automatic_medial(
-    template: &MedialTemplate,
-    template_path: &Path,
-    inputs: &Inputs,
-    out: &Path,
-) -> Result<Config, CliError> {
-    let boundary = boundary_mesh(template).map_err(|e| model_error(template_path, e))?;
-    let axes = PrincipalAxes::of(boundary.points()).map_err(|e| model_error(template_path, e))?;
-    let geometry = Geometry::of(template, &boundary, &axes);
-    // Voxels of half the mean spoke, so that the wall is a few voxels thick.
-    let spacing = (geometry.mean_spoke_mm / 2.0).max(geometry.long_extent_mm / 256.0);
-    let (alignment, target) = target_and_alignment(&boundary, inputs, spacing)?;
-    let aligned = write_aligned(template, &alignment, out)?;
-    Ok(geometry
-        .plan()
-        .automatic(aligned, &target, template.landmarks()))
-}
-
-/// [`automatic`] for a plain mesh: the whole initial map is applied (there are no constraints
-/// to keep), then one unconstrained stage ([`crate::plan::automatic_plain`]).
-fn automatic_plain(
-    mesh: &TriMesh,
-    template_path: &Path,
-    inputs: &Inputs,
-    out: &Path,
-) -> Result<Config, CliError> {
-    let dice_refused = || {
-        CliError::Input(format!(
-            "{} is a plain mesh: a Dice fit needs a medial template (a MedialIndex point \
-             array); fit a plain mesh with --target or --surface",
-            template_path.display()
-        ))
-    };
-    if inputs.image.is_some() {
-        return Err(dice_refused());
+/// The file of a stage's source.
+fn source_path(source: &Source) -> &Path {
+    match source {
+        Source::Target(p) | Source::Transform(p) | Source::Image(p, _) | Source::Surface(p) => p,
     }
-    let axes = PrincipalAxes::of(mesh.points()).map_err(|e| model_error(template_path, e))?;
-    let sigma = plain_sigma(mesh, &axes);
-    let (alignment, target) = target_and_alignment(mesh, inputs, axes.extent.z / 128.0)?;
-    create_dir(out)?;
-    medial_io::affine::write_affine(&out.join(ALIGNMENT), &alignment)?;
-    let aligned = aligned_template_path(out)?;
-    vtk::write_trimesh(
-        &aligned,
-        &carry_mesh(mesh, &alignment)?,
-        write_options(false),
-    )?;
-    crate::plan::automatic_plain(aligned, &target, sigma, mesh.points()).ok_or_else(dice_refused)
-}
-
-/// An initial map that is at most this far from a similarity ([`anisotropy`]) is taken as its
-/// similarity alone: applying and projecting would move the template by less than the
-/// projection's own tolerance can tell.
-const AFFINE_ANISOTROPY: f64 = 0.01;
-
-/// The similarity by moments and overlap, then the affine map by moments when it raises the
-/// overlap and is more than [`AFFINE_ANISOTROPY`] from a similarity.
-fn align_to_image(
-    boundary: &TriMesh,
-    mask: &Volume,
-    image: &Path,
-) -> Result<Matrix4<f64>, CliError> {
-    let s = align_similarity(boundary, mask).map_err(|e| model_error(image, e))?;
-    tracing::info!(
-        "initial similarity: scale {:.4}, voxel Dice {:.3} → {:.3}",
-        s.scale,
-        s.voxel_dice_before,
-        s.voxel_dice
-    );
-    let carried = carry_mesh(boundary, &s.matrix)?;
-    let a = align_affine(&carried, mask).map_err(|e| model_error(image, e))?;
-    if anisotropy(&a.matrix) <= AFFINE_ANISOTROPY {
-        return Ok(s.matrix);
-    }
-    tracing::info!(
-        "initial affine: anisotropy {:.1} %, voxel Dice {:.3} → {:.3}",
-        100.0 * anisotropy(&(a.matrix * s.matrix)),
-        a.voxel_dice_before,
-        a.voxel_dice
-    );
-    Ok(a.matrix * s.matrix)
-}
-
-/// The least fraction of the target points' spread ([`explained_spread`]) that the
-/// least-squares similarity must account for: below it the points are taken not to correspond
-/// to the template boundary's, one for one.
-const MIN_EXPLAINED_SPREAD: f64 = 0.5;
-
-/// The least-squares similarity to the corresponding points, or the least-squares affine map
-/// when it is more than [`AFFINE_ANISOTROPY`] from a similarity (and preserves orientation:
-/// points that correspond poorly can call for a reflection). Points that the similarity
-/// explains less than [`MIN_EXPLAINED_SPREAD`] of are refused: they do not correspond.
-fn align_to_points(
-    boundary: &TriMesh,
-    q: &[Vec3],
-    points: &Path,
-) -> Result<Matrix4<f64>, CliError> {
-    let bad = |e: medial_core::Error| CliError::Input(format!("{}: {e}", points.display()));
-    let similarity = similarity_between(boundary.points(), q).map_err(bad)?;
-    let by_similarity = carry_points(boundary.points(), &similarity);
-    let explained = explained_spread(&by_similarity, q);
-    if explained.is_nan() || explained < MIN_EXPLAINED_SPREAD {
-        return Err(CliError::NoCorrespondence {
-            path: points.to_path_buf(),
-            explained,
-            minimum: MIN_EXPLAINED_SPREAD,
-        });
-    }
-    let rms = |moved: &[Vec3]| {
-        let sum: f64 = moved
-            .iter()
-            .zip(q)
-            .map(|(a, b)| (a - b).norm_squared())
-            .sum();
-        (sum / q.len() as f64).sqrt()
-    };
-    let rms_similarity = rms(&by_similarity);
-    let affine = match affine_between(boundary.points(), q) {
-        Ok(affine) => Some(affine).filter(|a| anisotropy(a) > AFFINE_ANISOTROPY),
-        Err(e) => {
-            tracing::warn!("no initial affine map, the similarity alone: {e}");
-            None
-        }
-    };
-    let Some(affine) = affine else {
-        tracing::info!(
-            "initial similarity: rms distance {rms_similarity:.3} mm, {:.1} % of the points' \
-             spread explained",
-            100.0 * explained
-        );
-        return Ok(similarity);
-    };
-    tracing::info!(
-        "initial affine: anisotropy {:.1} %, rms distance {rms_similarity:.3} mm (similarity, \
-         {:.1} % of the points' spread explained) → {:.3} mm",
-        100.0 * anisotropy(&affine),
-        100.0 * explained,
-        rms(&carry_points(boundary.points(), &affine))
-    );
-    Ok(affine)
-}
-
-/// A closed surface is rasterized with voxels of `spacing` mm and aligned to as an image; an
-/// open one gets no initial alignment.
-fn align_to_surface(
-    boundary: &TriMesh,
-    mesh: &TriMesh,
-    surface: &Path,
-    spacing: f64,
-) -> Result<Matrix4<f64>, CliError> {
-    if let Err(defect) = check_closed_oriented_manifold(mesh).and_then(|_| check_outward(mesh)) {
-        tracing::info!("no initial alignment: the surface is not a closed outward mesh ({defect})");
-        return Ok(Matrix4::identity());
-    }
-    let (dims, grid) =
-        grid_around(mesh, spacing, 2.0 * spacing).map_err(|e| model_error(surface, e))?;
-    let mask = rasterize(mesh, dims, grid).map_err(|e| model_error(surface, e))?;
-    align_to_image(boundary, &mask, surface)
-}
-
-/// `points` carried by the affine map `m`.
-fn carry_points(points: &[Vec3], m: &Matrix4<f64>) -> Vec<Vec3> {
-    points
-        .iter()
-        .map(|p| m.transform_point(&(*p).into()).coords)
-        .collect()
-}
-
-/// `mesh` carried by the affine map `m`.
-fn carry_mesh(mesh: &TriMesh, m: &Matrix4<f64>) -> Result<TriMesh, CliError> {
-    Ok(TriMesh::new(
-        carry_points(mesh.points(), m),
-        mesh.triangles().to_vec(),
-    )?)
-}
-
-/// Carries `template` by `alignment` and writes it as `out/aligned_template.vtk`, the map as
-/// `out/alignment.txt`; returns the template's absolute path. A map that is not a similarity
-/// breaks the medial constraints: the carried template is projected back onto them
-/// ([`project`]); a projection that fails is an error naming the map. A template that is not
-/// medial as given (an inflated sheet before its projection) is projected too, with a warning
-/// when that fails.
-fn write_aligned(
-    template: &MedialTemplate,
-    alignment: &Matrix4<f64>,
-    out: &Path,
-) -> Result<PathBuf, CliError> {
-    create_dir(out)?;
-    medial_io::affine::write_affine(&out.join(ALIGNMENT), alignment)?;
-    let mut carried = template.with_landmarks(&carry_points(template.landmarks(), alignment))?;
-    let options = ProjectOptions::default();
-    let affine = anisotropy(alignment) > AFFINE_ANISOTROPY;
-    let medial = ConstraintFigures::of(
-        &carried,
-        &MedialConstraints::new(&carried),
-        carried.landmarks(),
-    )
-    .meets(&options);
-    if affine || !medial {
-        let why = if affine {
-            "after the affine map"
-        } else {
-            "as given"
-        };
-        match project(&carried, &options) {
-            Ok(projection) => {
-                tracing::info!(
-                    "template projected onto its constraints {why}: {:.3}° / {:.3} % → {:.3}° / \
-                     {:.3} %, landmarks moved ≤ {:.3} mm (rms {:.3} mm)",
-                    projection.before.max_spoke_normal_deg,
-                    100.0 * projection.before.max_mismatch,
-                    projection.after.max_spoke_normal_deg,
-                    100.0 * projection.after.max_mismatch,
-                    projection.max_displacement,
-                    projection.rms_displacement
-                );
-                carried = projection.template;
-            }
-            Err(e) if affine => {
-                return Err(CliError::Input(format!(
-                    "the initial affine map (anisotropy {:.1} %) cannot be followed by a \
-                     projection onto the medial constraints: {e}; give a config with an SSD \
-                     stage instead",
-                    100.0 * anisotropy(alignment)
-                )))
-            }
-            Err(e) => tracing::warn!("the template is not medial and its projection failed: {e}"),
-        }
-    }
-    let aligned = aligned_template_path(out)?;
-    medial_io::cmrep::write_template(&aligned, &carried, write_options(false))?;
-    Ok(aligned)
 }
 
 /// The initial map of an automatic fit, in its output folder.
@@ -420,23 +211,13 @@ const ALIGNMENT: &str = "alignment.txt";
 /// output folder.
 const ALIGNED_TEMPLATE: &str = "aligned_template.vtk";
 
-/// The absolute path of [`ALIGNED_TEMPLATE`] in `out` (the resolved config names it so).
-fn aligned_template_path(out: &Path) -> Result<PathBuf, CliError> {
-    std::path::absolute(out.join(ALIGNED_TEMPLATE)).map_err(|e| CliError::io(out, e))
-}
-
-/// The files of an automatic fit's initial alignment, written into the output folder before
-/// the fit because its config starts from them, belong to its set: copied into it, they are
-/// listed in `summary.json` (and removed by a later set of another kind).
-fn keep_alignment(set: &mut ResultSet, config: &Config, out: &Path) -> Result<(), CliError> {
-    if config.model.template != aligned_template_path(out)? {
-        return Ok(());
-    }
-    for name in [ALIGNMENT, ALIGNED_TEMPLATE] {
-        let from = out.join(name);
-        if from.exists() {
-            std::fs::copy(&from, set.file(name)?).map_err(|e| CliError::io(&from, e))?;
-        }
+/// An automatic fit's start belongs to its set: the aligned template and the initial map.
+fn write_start(set: &mut ResultSet, start: &Start) -> Result<(), CliError> {
+    medial_io::affine::write_affine(&set.file(ALIGNMENT)?, &start.alignment)?;
+    let path = set.file(ALIGNED_TEMPLATE)?;
+    match &start.model {
+        Model::Medial(t) => medial_io::cmrep::write_template(&path, t, write_options(false))?,
+        Model::Plain(mesh) => vtk::write_trimesh(&path, mesh, write_options(false))?,
     }
     Ok(())
 }
@@ -465,44 +246,24 @@ bits.\n";
 /// that ends at an unsound iterate, or with its constraints above their tolerance, writes its
 /// results (marked in `summary.json`'s `status`) and then returns the error that says so; so
 /// does a fit stopped by SIGINT or SIGTERM, which also writes its checkpoint.
-pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
-    let model = medial_io::model::read_model(&config.model.template)?;
-    // Constrained and Dice stages rely on the medial points staying inside (Dice samples the
-    // prisms); the others only on the boundary surface.
-    let (prisms, surface) = (Guard::new(&model), Guard::of_surface(&model));
+pub fn run(resolved: &Resolved, options: &FitOptions) -> Result<Summary, CliError> {
+    let config = &resolved.config;
+    let model = match &resolved.start {
+        Some(start) => start.model.clone(),
+        None => medial_io::model::read_model(&config.model.template)?,
+    };
     let flow = flow_of(config, model.landmarks().len())?;
-    let prepared = config
-        .stages
-        .iter()
-        .map(|s| stage::prepare(s, &model))
-        .collect::<Result<Vec<_>, _>>()?;
-    let resolved = stage::with_choices(config, &prepared);
-    let config = &resolved;
-    let planned: Vec<PlannedStage<'_>> = prepared
-        .iter()
-        .map(|p| PlannedStage {
-            stage: Stage {
-                flow: &flow,
-                initial: model.landmarks(),
-                attachment: p.attachment.as_ref(),
-                data_weight: p.data_weight,
-                constraints: p.constraints.as_ref().map(|c| c as &dyn ConstraintSet),
-                guard: Some(if p.constraints.is_some() || p.mask.is_some() {
-                    &prisms
-                } else {
-                    &surface
-                }),
-            },
-            schedule: p.schedule,
-            lbfgs: p.lbfgs,
-        })
-        .collect();
+    let prepared = stage::prepare_all(config, &model)?;
+    let with_choices = stage::with_choices(config, &prepared);
+    let config = &with_choices;
+    let engine = medial_core::fit::run::Fit::new(model, flow, prepared);
+    let planned = engine.planned();
     let fit = Fit {
         config,
         options,
-        model: &model,
-        flow: &flow,
-        prepared: &prepared,
+        model: engine.model(),
+        flow: engine.flow(),
+        prepared: engine.stages(),
         planned: &planned,
     };
     let (resumed, fingerprint) = if options.resume {
@@ -516,7 +277,9 @@ pub fn run(config: &Config, options: &FitOptions) -> Result<Summary, CliError> {
         (None, None)
     };
     let mut set = ResultSet::begin(&options.out)?;
-    keep_alignment(&mut set, config, &options.out)?;
+    if let Some(start) = &resolved.start {
+        write_start(&mut set, start)?;
+    }
     write_text(&set.file("config.toml")?, &config.to_toml(RESOLVED_HEADER)?)?;
     let ended = fit.optimise(resumed, fingerprint)?;
     fit.write_set(set, ended)
@@ -529,7 +292,7 @@ struct Fit<'a> {
     options: &'a FitOptions,
     model: &'a Model,
     flow: &'a Flow,
-    prepared: &'a [Prepared],
+    prepared: &'a [PreparedStage],
     planned: &'a [PlannedStage<'a>],
 }
 
@@ -586,7 +349,7 @@ impl Watch {
             FitEvent::Iteration { stage, progress: p } => {
                 let (name, prepared) = (&fit.config.stages[stage].name, &fit.prepared[stage]);
                 let e = p.report.evaluation;
-                let figures = prepared.figures_at(fit.model, e, &e.final_positions);
+                let figures = stage::figures_at(prepared, fit.model, e, &e.final_positions);
                 let row = LogRow {
                     stage: name,
                     al_iteration: p.al_iteration,
@@ -792,7 +555,7 @@ impl Fit<'_> {
             .zip(self.prepared)
             .zip(outcomes.iter().zip(seconds))
             .map(|((cfg, p), (outcome, seconds))| {
-                let figures = p.end_figures(self.model, &outcome.evaluation)?;
+                let figures = stage::end_figures(p, self.model, &outcome.evaluation)?;
                 Ok(stage_summary(
                     cfg,
                     p.constraints.is_some(),
@@ -823,7 +586,7 @@ impl Fit<'_> {
             medial_atoms: model.medial_count(),
             constraints_per_time_point: model
                 .medial()
-                .map_or(0, |t| MedialConstraints::new(t).len()),
+                .map_or(0, |t| medial_core::model::MedialConstraints::new(t).len()),
             time_steps: self.flow.time_steps(),
             sigma: self.flow.kernel().sigma(),
             threads: self.options.threads,

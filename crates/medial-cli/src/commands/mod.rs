@@ -163,9 +163,9 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
                 })
                 .expect("clap requires --out without a config or --resume");
             let config = config.or_else(|| resume.as_ref().map(|dir| dir.join("config.toml")));
-            let cfg = fit::resolve(config.as_deref(), &inputs, &out)?;
+            let resolved = fit::resolve(config.as_deref(), &inputs, &out)?;
             let summary = fit::run(
-                &cfg,
+                &resolved,
                 &fit::FitOptions {
                     out: out.clone(),
                     threads,

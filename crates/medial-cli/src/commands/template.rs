@@ -28,7 +28,6 @@ use medial_core::mesh::topology::{check_closed_oriented_manifold, check_outward}
 use medial_core::mesh::Bounds;
 use medial_core::model::template::MAX_SPOKES;
 use medial_core::model::{MedialTemplate, SpokeMetrics};
-use medial_core::synth::boundary_mesh;
 use medial_core::TriMesh;
 use medial_io::nifti_volume::{write_nifti, NiftiType};
 use serde::Serialize;
@@ -418,7 +417,7 @@ fn fit_to_shape(
         target: None,
         surface: None,
     };
-    let config = fit::resolve(None, &inputs, &out)?;
+    let resolved = fit::resolve(None, &inputs, &out)?;
     let options = FitOptions {
         out: out.clone(),
         threads,
@@ -426,7 +425,7 @@ fn fit_to_shape(
         checkpoint_every: None,
         resume: false,
     };
-    match fit::run(&config, &options) {
+    match fit::run(&resolved, &options) {
         // The final projection enforces the constraints the fit left above tolerance.
         Ok(_) | Err(CliError::ConstraintsNotMet(_)) => {}
         // The fit stopped where the model would fold and wrote its last sound iterate: the
@@ -445,7 +444,7 @@ fn fit_to_shape(
 
 /// Voxel Dice of the template's boundary against `mask` on its grid.
 fn dice_of(template: &MedialTemplate, mask: &Volume, path: &Path) -> Result<f64, CliError> {
-    let boundary = boundary_mesh(template).map_err(|e| model_error(path, e))?;
+    let boundary = template.boundary_mesh().map_err(|e| model_error(path, e))?;
     voxel_dice(&boundary, mask).map_err(|e| model_error(path, e))
 }
 
@@ -460,7 +459,9 @@ fn figures_of(
     args: &TemplateArgs,
     [dice_before_fit, moved, fit_seconds]: [f64; 3],
 ) -> Result<TemplateFigures, CliError> {
-    let boundary = boundary_mesh(template).map_err(|e| model_error(&args.out, e))?;
+    let boundary = template
+        .boundary_mesh()
+        .map_err(|e| model_error(&args.out, e))?;
     let dice = voxel_dice(&boundary, mask).map_err(|e| model_error(&args.out, e))?;
     let dice_input_grid = match shape {
         Shape::Mask(input, _) => {

@@ -18,8 +18,9 @@ use crate::{Error, Result, Vec3};
 use serde::{Deserialize, Serialize};
 use std::cell::Cell;
 
-/// When `μ` grows between AL iterations.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+/// When `μ` grows between AL iterations (in a config: `always`, `if_not_halved`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum MuUpdate {
     /// After every AL iteration.
     #[default]

@@ -8,9 +8,14 @@
 pub mod align;
 pub mod augmented_lagrangian;
 pub mod guard;
+pub mod initial;
 pub mod lbfgs_vector;
 pub mod objective;
 pub mod optimize;
+pub mod plan;
+pub mod prepare;
+pub mod run;
+pub mod spec;
 pub mod stages;
 
 pub use align::{
@@ -25,5 +30,9 @@ pub use guard::{Guard, Unsound};
 pub use objective::{ConstraintSet, Evaluation, Objective, Penalty};
 pub use optimize::{
     minimize, LbfgsOptions, Minimization, MinimizerCheckpoint, ProgressRule, Start, StopReason,
+};
+pub use prepare::{PreparedStage, Target};
+pub use spec::{
+    AttachmentSpec, DiceSpec, FitSpec, FlowSettings, MedialTolerance, StageSpec, VarifoldSpec,
 };
 pub use stages::{run_stages, run_stages_resumable, Checkpoint, FitEvent, FitRun, PlannedStage};

@@ -34,6 +34,12 @@ impl Bounds {
         self.max - self.min
     }
 
+    /// The box in words: `[x0, x1] × [y0, y1] × [z0, z1]`, one decimal.
+    pub fn span(&self) -> String {
+        let axis = |a: usize| format!("[{:.1}, {:.1}]", self.min[a], self.max[a]);
+        format!("{} × {} × {}", axis(0), axis(1), axis(2))
+    }
+
     /// The length of the diagonal, `|max − min|`.
     pub fn diagonal(&self) -> f64 {
         self.extent().norm()

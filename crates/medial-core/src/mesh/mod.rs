@@ -51,6 +51,31 @@ impl TriMesh {
     pub fn into_parts(self) -> (Vec<Vec3>, Vec<[usize; 3]>) {
         (self.points, self.triangles)
     }
+
+    /// The mesh with its points carried by the affine map `m` ([`carry_points`]), the same
+    /// triangles.
+    pub fn carried(&self, m: &nalgebra::Matrix4<f64>) -> Self {
+        Self {
+            points: carry_points(&self.points, m),
+            triangles: self.triangles.clone(),
+        }
+    }
+}
+
+/// `points` carried by the affine map `m` (a 4×4 matrix of last row `0 0 0 1`, acting on
+/// homogeneous coordinates): `A p + t`.
+///
+/// ```
+/// use medial_core::mesh::carry_points;
+/// use medial_core::Vec3;
+/// let shift = nalgebra::Matrix4::new_translation(&Vec3::new(1.0, 2.0, 3.0));
+/// assert_eq!(carry_points(&[Vec3::zeros()], &shift), [Vec3::new(1.0, 2.0, 3.0)]);
+/// ```
+pub fn carry_points(points: &[Vec3], m: &nalgebra::Matrix4<f64>) -> Vec<Vec3> {
+    points
+        .iter()
+        .map(|p| m.transform_point(&(*p).into()).coords)
+        .collect()
 }
 
 /// The centroid `c = Σ p / n` and the covariance `Σ (p − c)(p − c)ᵀ / n` of `points` (mm, mm²);

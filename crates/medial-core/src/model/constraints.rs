@@ -36,10 +36,13 @@ struct EqualSpokes {
     spoke: usize,
 }
 
-/// The unit of the constraint values (see the module documentation).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// The unit of the constraint values (see the module documentation; in a config: `absolute`,
+/// `relative`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum ConstraintUnits {
-    /// SPEC §3 as written: mm² (the reference implementation; the paper's μ values carry over).
+    /// docs/method.md §4 as written: mm² (the reference implementation; the paper's μ values
+    /// carry over).
     #[default]
     Absolute,
     /// Divided by the template's spoke and tangent lengths: dimensionless, alike for every spoke.

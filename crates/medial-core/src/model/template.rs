@@ -98,6 +98,14 @@ impl MedialTemplate {
         &self.landmarks[..self.nb]
     }
 
+    /// The boundary as a triangle mesh (its boundary points and triangles).
+    pub fn boundary_mesh(&self) -> crate::Result<crate::TriMesh> {
+        crate::TriMesh::new(
+            self.boundary_points().to_vec(),
+            self.boundary_triangles().to_vec(),
+        )
+    }
+
     /// The medial points (the last `nm` landmarks).
     pub fn medial_points(&self) -> &[Vec3] {
         &self.landmarks[self.nb..]

@@ -98,7 +98,7 @@ impl SyntheticCase {
 
     /// The template's boundary mesh.
     pub fn boundary(&self) -> Result<TriMesh> {
-        boundary_mesh(self.template())
+        self.template().boundary_mesh()
     }
 
     /// [`target_boundary`] of the template: the warped boundary, point for point.
@@ -116,12 +116,4 @@ impl SyntheticCase {
     pub fn target_image(&self, spacing_mm: f64, margin_mm: f64) -> Result<Volume> {
         target_image(&self.target_surface()?, spacing_mm, margin_mm)
     }
-}
-
-/// The boundary mesh of `template` (its boundary points and triangles).
-pub fn boundary_mesh(template: &MedialTemplate) -> Result<TriMesh> {
-    TriMesh::new(
-        template.boundary_points().to_vec(),
-        template.boundary_triangles().to_vec(),
-    )
 }

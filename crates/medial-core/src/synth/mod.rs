@@ -32,8 +32,8 @@ mod warp;
 
 pub use axes::PrincipalAxes;
 pub use case::{
-    boundary_mesh, target_boundary, target_image, target_surface, SyntheticCase,
-    SHEET_SUBDIVISIONS, TARGET_SUBDIVISIONS,
+    target_boundary, target_image, target_surface, SyntheticCase, SHEET_SUBDIVISIONS,
+    TARGET_SUBDIVISIONS,
 };
 pub use shape::{
     Shape, CUP_EQUATOR, CUP_LENGTH, CUP_OPENING, CUP_RADIUS_APEX, CUP_RADIUS_BASE,

@@ -3,7 +3,7 @@
 
 use super::fitted::FittedMap;
 use crate::error::CliError;
-use crate::memory::Estimate;
+use medial_core::memory::Estimate;
 use medial_core::image::Volume;
 use medial_core::Vec3;
 use medial_io::nifti_volume::{read_nifti_file, write_nifti, NiftiType};
@@ -32,8 +32,9 @@ impl PullBack {
     /// The pull-back on `grid` of carrying by `map` (by its inverse with `inverse`).
     pub fn on(grid: &Volume, map: &FittedMap, inverse: bool) -> Result<Self, CliError> {
         let [nx, ny, nz] = grid.dims();
-        Estimate::pull_back(nx * ny * nz)
-            .check(|| format!("a pull-back on {nx}×{ny}×{nz} voxels"))?;
+        crate::memory::check(&Estimate::pull_back(nx * ny * nz), || {
+            format!("a pull-back on {nx}×{ny}×{nz} voxels")
+        })?;
         let centres: Vec<Vec3> = (0..nz)
             .flat_map(|k| (0..ny).flat_map(move |j| (0..nx).map(move |i| [i, j, k])))
             .map(|index| grid.voxel_centre(index))

@@ -12,9 +12,10 @@
 use super::{target_image, CaseFiles, SynthArgs};
 use crate::error::CliError;
 use crate::output::{model_error, print_json, TemplateSummary};
-use crate::plan::{Geometry, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE};
+use super::{boundary_config, paper_config, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE};
+use medial_core::fit::plan::Geometry;
 use medial_core::mesh::topology::signed_volume;
-use medial_core::synth::{boundary_mesh, target_boundary, target_surface, PrincipalAxes, Warp};
+use medial_core::synth::{target_boundary, target_surface, PrincipalAxes, Warp};
 use medial_core::Vec3;
 use nalgebra::{Matrix4, Rotation3, Unit};
 use serde::Serialize;
@@ -143,7 +144,7 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
     let args = &Options::of(args, template_path);
     let template = medial_io::cmrep::read_template(args.template)?;
     let in_template = |e| model_error(args.template, e);
-    let boundary = boundary_mesh(&template).map_err(in_template)?;
+    let boundary = template.boundary_mesh().map_err(in_template)?;
     let axes = PrincipalAxes::of(boundary.points()).map_err(in_template)?;
     let warp = build_warp(args, &axes)?;
     let target = target_boundary(&boundary, &warp).map_err(in_template)?;
@@ -160,13 +161,11 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
         configs: &[
             (
                 "fit_boundary.toml",
-                plan.boundary_ssd()
-                    .to_toml(&format!("{header}{BOUNDARY_SSD_NOTE}"))?,
+                boundary_config(&plan).to_toml(&format!("{header}{BOUNDARY_SSD_NOTE}"))?,
             ),
             (
                 "fit.toml",
-                plan.paper_schedule()
-                    .to_toml(&format!("{header}{PAPER_SCHEDULE_NOTE}"))?,
+                paper_config(&plan).to_toml(&format!("{header}{PAPER_SCHEDULE_NOTE}"))?,
             ),
         ],
     }

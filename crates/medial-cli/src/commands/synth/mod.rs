@@ -5,14 +5,16 @@
 //!
 //! The template is a built-in analytic shape (`medial synth cup|toy`, this module) or any cmrep
 //! template (`medial synth --from TEMPLATE.vtk`, [`from_template`]); [`CaseFiles`] (the files
-//! of a case) and [`FitPlan`](crate::plan::FitPlan) (its configs) serve both.
+//! of a case) and the engine's [`FitPlan`] (its configs: [`paper_config`], [`boundary_config`])
+//! serve both.
 
 mod from_template;
 
 use crate::error::CliError;
 use crate::memory;
 use crate::output::{print_json, write_options, write_text, TemplateSummary};
-use crate::plan::{FitPlan, PAPER_SCHEDULE_NOTE};
+use crate::config::{Config, Source};
+use medial_core::fit::plan::FitPlan;
 use medial_core::image::rasterize::grid_around;
 use medial_core::image::volume::Volume;
 use medial_core::model::template::MedialTemplate;
@@ -82,6 +84,39 @@ fn plan(shape: Shape) -> FitPlan {
     }
 }
 
+/// The comment of a case's `fit.toml` ([`paper_config`]).
+const PAPER_SCHEDULE_NOTE: &str = "# As in the paper: one SSD AL iteration (mu = 20) towards \
+the affine initialisation, then the\n# Dice attachment with mu rising tenfold per AL iteration. \
+The constraints are in relative units\n# (mu = 0.02 ... 2000: on cmrep's t001 about the \
+paper's 0.001 ... 100 in mm²).\n";
+
+/// The comment of a case's `fit_boundary.toml` ([`boundary_config`]).
+const BOUNDARY_SSD_NOTE: &str = "# SSD fit of the template's boundary points to the warped \
+ones (known correspondence), with\n# the medial constraints on in relative units, mu = 20, 200, \
+2000, 20000.\n";
+
+/// A case's `fit.toml`: the paper's schedule ([`FitPlan::paper_schedule`]) from the case's
+/// files: SSD towards `affine.txt`, then Dice against `target.nii.gz`.
+fn paper_config(plan: &FitPlan) -> Config {
+    Config::of_spec(
+        &plan.paper_schedule(),
+        "template.vtk".into(),
+        vec![
+            Source::Transform("affine.txt".into()),
+            Source::Image("target.nii.gz".into(), None),
+        ],
+    )
+}
+
+/// A case's `fit_boundary.toml`: SSD to `target_boundary.vtk` ([`FitPlan::boundary_ssd`]).
+fn boundary_config(plan: &FitPlan) -> Config {
+    Config::of_spec(
+        &plan.boundary_ssd(),
+        "template.vtk".into(),
+        vec![Source::Target("target_boundary.vtk".into())],
+    )
+}
+
 /// What `medial synth` prints.
 #[derive(Serialize)]
 struct SynthSummary {
@@ -130,9 +165,7 @@ fn run_shape(args: &SynthArgs, shape: Shape) -> Result<(), CliError> {
         affine: case.warp.affine(),
         configs: &[(
             "fit.toml",
-            plan(shape)
-                .paper_schedule()
-                .to_toml(&format!("{header}{PAPER_SCHEDULE_NOTE}"))?,
+            paper_config(&plan(shape)).to_toml(&format!("{header}{PAPER_SCHEDULE_NOTE}"))?,
         )],
     }
     .write(&args.out)?;

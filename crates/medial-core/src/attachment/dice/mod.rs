@@ -61,8 +61,9 @@ use prism::{prism_faces, PrismFaces};
 use sampling::{subdivide, Ends, Stencil};
 use sums::ChunkSums;
 
-/// Fewest triangles per parallel work item.
-const MIN_CHUNK: usize = 128;
+/// Fewest triangles per parallel work item (the memory estimate counts gradient sums per
+/// chunk: [`crate::memory::Estimate::dice`]).
+pub const MIN_CHUNK: usize = 128;
 
 /// Most parallel work items: each sums its gradients into buffers of all `k` landmarks, which
 /// are zeroed and then added in chunk order, so that more chunks than threads cost memory

@@ -233,7 +233,7 @@ mod tests {
     use super::super::{DiceAttachment, DiceParams, Ends};
     use super::*;
     use crate::image::rasterize::{grid_around, rasterize};
-    use crate::synth::{boundary_mesh, Shape, SyntheticCase};
+    use crate::synth::{Shape, SyntheticCase};
 
     /// The sums over every triangle of the cup, moved a little off its own rasterization, on
     /// each instruction set the CPU has: the same bits (`layers` 5 and 11: one lane block with
@@ -244,7 +244,7 @@ mod tests {
             .unwrap()
             .projection
             .template;
-        let boundary = boundary_mesh(&template).unwrap();
+        let boundary = template.boundary_mesh().unwrap();
         let (dims, grid) = grid_around(&boundary, 0.5, 2.0).unwrap();
         let image = rasterize(&boundary, dims, grid)
             .unwrap()

@@ -2,9 +2,7 @@
 //! says what is wrong and why (exit 1, or 2 for a wrong command line), never with an abort, a
 //! hang or a result computed from garbage. The cases use the shipped toy (examples/toy).
 
-mod common;
-
-use common::{medial, one_line_error, s, text};
+use crate::common::{medial, one_line_error, s, text};
 use medial_core::image::volume::Volume;
 use medial_io::nifti_volume::{read_nifti, write_nifti, NiftiType};
 use nalgebra::{Matrix4, Vector3};

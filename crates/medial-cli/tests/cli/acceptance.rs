@@ -4,9 +4,7 @@
 //! ignored by default; run them with
 //! `cargo test --release -p medial-cli --test acceptance -- --ignored --nocapture`.
 
-mod common;
-
-use common::{data, f, run_json, s};
+use crate::common::{data, f, run_json, s};
 use serde_json::Value;
 use std::path::Path;
 

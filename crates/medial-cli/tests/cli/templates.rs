@@ -3,9 +3,7 @@
 //! `medial synth` for both cases (checked by `medial eval` on the written fit.toml),
 //! `medial synth --from` on cmrep's t001 template, `medial rasterize`, and how bad input is refused.
 
-mod common;
-
-use common::{data, f, run_fails, run_json, s, text};
+use crate::common::{data, f, run_fails, run_json, s, text};
 use medial_core::model::metrics::SpokeMetrics;
 use medial_core::model::template::MedialTemplate;
 use medial_core::Vec3;

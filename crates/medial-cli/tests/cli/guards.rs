@@ -6,9 +6,7 @@
 //! and the results of the last sound iterate written with `"status": "unsound"`; a schedule too
 //! short for the constraints exits 4; a sound fit's multipliers reproduce its final figures.
 
-mod common;
-
-use common::{f, medial, run_json, s, text};
+use crate::common::{f, medial, run_json, s, text};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 

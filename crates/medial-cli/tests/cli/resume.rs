@@ -7,9 +7,7 @@
 //! Dice over three AL iterations, constrained SSD to the warped points, its tolerances wide
 //! so that the fit ends with exit code 0), a second or two each.
 
-mod common;
-
-use common::{one_line_error, s, text};
+use crate::common::{one_line_error, s, text};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};

@@ -3,9 +3,7 @@
 //! (always LPS, about its centre), and the inverse map with `transform_invert = true` — all
 //! give the same SSD targets, read through `medial eval` at zero momenta.
 
-mod common;
-
-use common::{f, one_line_error, run_json, s};
+use crate::common::{f, one_line_error, run_json, s};
 use nalgebra::{Matrix4, Vector3, Vector4};
 use std::path::{Path, PathBuf};
 

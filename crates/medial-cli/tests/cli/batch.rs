@@ -4,9 +4,7 @@
 //! subjects, gathering that is idempotent and whose thickness table is the fitted templates'
 //! thickness, and the Slurm scripts.
 
-mod common;
-
-use common::{medial, one_line_error, run_fails, s, text};
+use crate::common::{medial, one_line_error, run_fails, s, text};
 use medial_core::model::{Model, SpokeMetrics};
 use std::path::{Path, PathBuf};
 

@@ -23,10 +23,8 @@ use proptest::prelude::*;
 use proptest::sample::Index;
 use proptest::test_runner::{TestCaseError, TestRunner};
 
-#[path = "common/clean.rs"]
-mod clean;
-#[path = "common/glb.rs"]
-mod glb;
+use crate::common::clean;
+use crate::common::glb;
 
 /// Mutated files per reader.
 const CASES: u32 = 3000;

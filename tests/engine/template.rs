@@ -6,7 +6,7 @@ use medial::build::{sheet_of_mask, Sampling, ShapeSheet};
 use medial::image::rasterize::{grid_around, rasterize};
 use medial::mesh::distance::SurfaceDistance;
 use medial::model::{MedialTemplate, SpokeMetrics};
-use medial::synth::{boundary_mesh, Shape, SyntheticCase};
+use medial::synth::{Shape, SyntheticCase};
 use medial::Vec3;
 
 /// Voxel of the rasterized shapes, mm.
@@ -70,7 +70,7 @@ fn to_sheet(template: &MedialTemplate, radius: &[f64], p: Vec3) -> (Vec3, f64) {
 fn recover(shape: Shape) -> (MedialTemplate, ShapeSheet) {
     let case = SyntheticCase::build(shape).unwrap();
     let template = case.projection.template;
-    let boundary = boundary_mesh(&template).unwrap();
+    let boundary = template.boundary_mesh().unwrap();
     let (dims, to_world) = grid_around(&boundary, VOXEL, 3.0 * VOXEL).unwrap();
     let mask = rasterize(&boundary, dims, to_world).unwrap();
     let found = sheet_of_mask(&mask, Sampling::Atoms(300)).unwrap();
@@ -99,7 +99,7 @@ struct VertexError {
 fn sheet_errors(template: &MedialTemplate, found: &ShapeSheet) -> Vec<VertexError> {
     let metrics = SpokeMetrics::compute(template, template.landmarks());
     let radius: Vec<f64> = metrics.thickness.iter().map(|t| t / 2.0).collect();
-    let boundary = SurfaceDistance::new(&boundary_mesh(template).unwrap()).unwrap();
+    let boundary = SurfaceDistance::new(&template.boundary_mesh().unwrap()).unwrap();
     let border: std::collections::HashSet<usize> = found.border.iter().copied().collect();
     let seam_vertices: usize = found.seams.iter().map(|s| s.points.len()).sum();
     found
@@ -232,7 +232,7 @@ fn the_toy_seam_is_recovered_within_a_voxel_its_sheets_within_half_a_voxel_on_av
 #[test]
 fn a_branching_shape_gets_about_the_atoms_asked_for() {
     let case = SyntheticCase::build(Shape::Toy).unwrap();
-    let boundary = boundary_mesh(&case.projection.template).unwrap();
+    let boundary = case.projection.template.boundary_mesh().unwrap();
     let (dims, to_world) = grid_around(&boundary, VOXEL, 3.0 * VOXEL).unwrap();
     let mask = rasterize(&boundary, dims, to_world).unwrap();
     // Whole rings make a lattice's count jump (the toy's 12 × 24 mm sheets at 300 atoms: 29,

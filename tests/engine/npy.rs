@@ -6,8 +6,7 @@ use medial::io::npy::{read_npy, write_npy, NpyArray};
 use medial::io::Error;
 use proptest::prelude::*;
 
-#[path = "common/clean.rs"]
-mod clean;
+use crate::common::clean;
 use clean::assert_clean;
 
 /// A version 1.0 `.npy` file as `numpy.save` writes it: magic, header dict padded with spaces

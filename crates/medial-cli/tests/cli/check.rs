@@ -2,9 +2,7 @@
 //! fit of the shipped toy with and without the medial constraints, which must stay at least
 //! ten times apart (the paper's Fig. 1 (b) against (c)).
 
-mod common;
-
-use common::{medial, one_line_error, run_json, s, text};
+use crate::common::{medial, one_line_error, run_json, s, text};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 

@@ -5,16 +5,13 @@
 //! segmentation lies on cmrep's fitted sheet and its Voronoi skeleton; bad input ends with a
 //! one-line error and a non-zero exit.
 
-mod common;
-
-use common::{data, f, medial, one_line_error, run_json, s, text};
+use crate::common::{data, f, medial, one_line_error, run_json, s, text};
 use medial_core::build::MedialSheet;
 use medial_core::image::volume::Volume;
 use medial_core::mesh::distance::SurfaceDistance;
 use medial_core::mesh::topology::{check_closed_oriented_manifold, check_outward};
 use medial_core::mesh::TriMesh;
 use medial_core::model::SpokeMetrics;
-use medial_core::synth::boundary_mesh;
 use medial_core::Vec3;
 use medial_io::nifti_volume::{read_nifti, write_nifti, NiftiType};
 use serde_json::Value;
@@ -116,7 +113,7 @@ fn a_template_of_the_synthetic_cup_meets_the_targets() {
         m.max_spoke_normal_deg
     );
     assert!(100.0 * m.max_spoke_mismatch <= 0.1 + 1e-9);
-    let boundary = boundary_mesh(&template).unwrap();
+    let boundary = template.boundary_mesh().unwrap();
     check_closed_oriented_manifold(&boundary).expect("closed, manifold");
     check_outward(&boundary).expect("outward");
     // The sheet is written too, with its radius.
@@ -174,7 +171,7 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
             .filter(|&m| template.spokes(m).len() == 3)
             .count();
         assert_eq!(three as u64, by_spokes[2]);
-        let boundary = boundary_mesh(&template).unwrap();
+        let boundary = template.boundary_mesh().unwrap();
         check_closed_oriented_manifold(&boundary).expect("closed, manifold");
         check_outward(&boundary).expect("outward");
         // The sheet written: a seam of edges in three triangles, no edge in more.

@@ -11,7 +11,7 @@ use medial::mesh::subdivide::midpoint_subdivide;
 use medial::model::metrics::SpokeMetrics;
 use medial::model::template::MedialTemplate;
 use medial::synth::{
-    boundary_mesh, target_boundary, target_image, target_surface, PrincipalAxes, Shape,
+    target_boundary, target_image, target_surface, PrincipalAxes, Shape,
     SyntheticCase, Warp,
 };
 use medial::{Error, TriMesh, Vec3};
@@ -606,7 +606,7 @@ fn bending_a_template_sets_angles_from_its_extent_and_keeps_the_affine_part() {
 fn a_bend_that_folds_the_shape_is_refused() {
     let t = t001();
     let axes = PrincipalAxes::of(t.boundary_points()).unwrap();
-    let boundary = boundary_mesh(&t).unwrap();
+    let boundary = t.boundary_mesh().unwrap();
     // Curvature radius smaller than the half-thickness of the shape: κx > 1 on one side.
     let w = Warp {
         bend: 2.0 / axes.extent.x,
@@ -640,7 +640,7 @@ fn similarity(centre: Vec3, degrees: f64, scale: f64, shift: Vec3) -> Matrix4<f6
 #[test]
 fn a_template_becomes_a_synthetic_case() {
     let t = t001();
-    let boundary = boundary_mesh(&t).unwrap();
+    let boundary = t.boundary_mesh().unwrap();
     let axes = PrincipalAxes::of(boundary.points()).unwrap();
     let affine = similarity(axes.centre, 5.0, 1.03, Vec3::new(1.0, 0.0, 0.0));
     let w = Warp::bending(&axes, 25.0, 10.0, &affine).unwrap();

@@ -1,6 +1,4 @@
-//! Helpers shared by the end-to-end tests of the `medial` binary (`mod common;` in each).
-// Each test crate compiles this module and uses a subset of it.
-#![allow(dead_code)]
+//! Helpers shared by the end-to-end tests of the `medial` binary.
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};

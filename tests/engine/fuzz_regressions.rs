@@ -10,8 +10,7 @@ use medial::io::nifti_volume::{parse_nifti, write_nifti, NiftiType};
 use medial::io::npy::{parse_npy, MAX_HEADER_DEPTH};
 use medial::io::Error;
 
-#[path = "common/clean.rs"]
-mod clean;
+use crate::common::clean;
 
 /// A `.npy` file of format `version` whose header (padded as numpy pads it) is `text`,
 /// followed by `data`.

@@ -8,9 +8,7 @@
 //! `MEDIAL_REQUIRE_TOOLS=1`: python3 with VTK (Debian's python3-vtk9), node with the npm package
 //! gltf-validator (found through NODE_PATH), and Debian's chromium.
 
-mod common;
-
-use common::{medial, one_line_error, s, text};
+use crate::common::{medial, one_line_error, s, text};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;

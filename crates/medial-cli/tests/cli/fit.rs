@@ -1,9 +1,7 @@
 //! End-to-end tests of `medial fit` and `medial eval` through the built binary, on cmrep's own
 //! t001 medial template (k = 503), and of how bad input is refused.
 
-mod common;
-
-use common::{data, f, medial, run_fails, run_json, s, text};
+use crate::common::{data, f, medial, run_fails, run_json, s, text};
 use medial_io::npy::read_npy;
 use serde_json::Value;
 use std::path::{Path, PathBuf};

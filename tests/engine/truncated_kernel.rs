@@ -3,8 +3,7 @@
 //! once-subdivided CAP left ventricle, 6,552 points; the benchmark `truncated` runs the
 //! twice-subdivided one, 25,868 points).
 
-#[path = "common/heart.rs"]
-mod heart;
+use crate::common::heart;
 
 use medial::attachment::ssd::Ssd;
 use medial::fit::objective::Objective;

@@ -13,8 +13,7 @@ use medial::io::volume::read_volume;
 use medial::io::Error;
 use medial::Vec3;
 
-#[path = "common/clean.rs"]
-mod clean;
+use crate::common::clean;
 use clean::assert_clean;
 use nalgebra::{Matrix3, Matrix4, Rotation3, Unit, Vector4};
 

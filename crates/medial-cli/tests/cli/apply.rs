@@ -3,9 +3,7 @@
 //! boundary, a label image pulled back with its warp read back against the point map, the
 //! per-atom table against the medial VTK, and the refusals.
 
-mod common;
-
-use common::{f, medial, one_line_error, run_json, s, text};
+use crate::common::{f, medial, one_line_error, run_json, s, text};
 use medial_core::image::Volume;
 use medial_core::Vec3;
 use medial_io::nifti_volume::{read_nifti, read_nifti_file, write_nifti, NiftiType};

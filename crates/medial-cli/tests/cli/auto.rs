@@ -2,9 +2,7 @@
 //! resolved config written beside the results and re-run to the same bits; on the shipped toy
 //! (a template and its segmentation).
 
-mod common;
-
-use common::{f, medial, run_fails, run_json as run_json_of, s, text};
+use crate::common::{f, medial, run_fails, run_json as run_json_of, s, text};
 use serde_json::Value;
 use std::path::Path;
 
@@ -242,7 +240,7 @@ fn a_plain_mesh_fits_without_a_config() {
     let last = f(&summary["final"]["data"]);
     assert!(last < first / 10.0, "{first} → {last}");
     assert!(f(&summary["final"]["mean_distance"]) < 0.1, "{summary}");
-    common::one_line_error(
+    crate::common::one_line_error(
         &[
             "fit",
             "--template",

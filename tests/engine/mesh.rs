@@ -6,10 +6,8 @@ use medial::io::mesh::{read_mesh, read_points, write_mesh};
 use medial::io::Error;
 use medial::{TriMesh, Vec3};
 
-#[path = "common/clean.rs"]
-mod clean;
-#[path = "common/glb.rs"]
-mod glb;
+use crate::common::clean;
+use crate::common::glb;
 use clean::assert_clean;
 use glb::{glb, gltf_json, tetra_buffer, tetra_glb, TETRA, TETRA_INDICES};
 

@@ -3,9 +3,7 @@
 //! known bend, twist and affine map), midpoint subdivided, its vertices and triangles shuffled,
 //! written as OBJ. The fit must approach the surface and keep the model medial.
 
-mod common;
-
-use common::{medial, s, text};
+use crate::common::{medial, s, text};
 use medial_core::mesh::subdivide::midpoint_subdivide;
 use medial_core::{TriMesh, Vec3};
 use std::path::Path;

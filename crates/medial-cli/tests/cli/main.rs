@@ -1,0 +1,19 @@
+//! The end-to-end tests of the `medial` binary, one module per command or subject (one test
+//! binary, so the whole stack links once).
+
+mod common;
+
+mod acceptance;
+mod apply;
+mod auto;
+mod bad_input;
+mod batch;
+mod check;
+mod fit;
+mod guards;
+mod resume;
+mod template;
+mod templates;
+mod transform;
+mod varifold;
+mod views;

@@ -1,0 +1,258 @@
+//! The initial alignment of an automatic fit (docs/method.md §8.1): where the template starts
+//! before the flow moves it.
+//!
+//! - Against an image (or a closed surface, rasterized): the similarity by moments and overlap
+//!   ([`align_similarity`]), then the affine map by moments ([`align_affine`]) when it raises
+//!   the overlap and is more than [`AFFINE_ANISOTROPY`] from a similarity.
+//! - Against corresponding points: the least-squares similarity, or the least-squares affine
+//!   map when it is more than [`AFFINE_ANISOTROPY`] from a similarity; points that the
+//!   similarity explains less than [`MIN_EXPLAINED_SPREAD`] of are refused (they do not
+//!   correspond).
+//! - Against an open surface: none.
+//!
+//! A similarity keeps a medial template medial. An affine map does not: the carried template is
+//! projected back onto its constraints ([`align_template`]); where that projection fails, the
+//! similarity alone is taken, since not moving the template further is always sound.
+//!
+//! ```
+//! use medial_core::fit::initial::{align_template, initial_alignment};
+//! use medial_core::fit::Target;
+//! use medial_core::synth::{Shape, SyntheticCase};
+//! let case = SyntheticCase::build(Shape::Toy).unwrap();
+//! let boundary = case.template().boundary_mesh().unwrap();
+//! let target = Target::Points(case.target_boundary().unwrap().points().to_vec());
+//! let alignment = initial_alignment(&boundary, &target, 1.0).unwrap();
+//! let aligned = align_template(case.template(), &alignment).unwrap();
+//! assert_eq!(aligned.template.landmark_count(), case.template().landmark_count());
+//! ```
+
+use crate::build::project::{project, ConstraintFigures, ProjectOptions};
+use crate::fit::align::{
+    affine_between, align_affine, align_similarity, anisotropy, explained_spread,
+    similarity_between,
+};
+use crate::fit::prepare::Target;
+use crate::image::rasterize::{grid_around, rasterize};
+use crate::image::volume::Volume;
+use crate::mesh::carry_points;
+use crate::mesh::topology::{check_closed_oriented_manifold, check_outward};
+use crate::model::constraints::MedialConstraints;
+use crate::model::template::MedialTemplate;
+use crate::{Error, Result, TriMesh, Vec3};
+use nalgebra::Matrix4;
+
+/// An initial map that is at most this far from a similarity ([`anisotropy`]) is taken as its
+/// similarity alone: applying and projecting would move the template by less than the
+/// projection's own tolerance can tell.
+pub const AFFINE_ANISOTROPY: f64 = 0.01;
+
+/// The least fraction of the target points' spread ([`explained_spread`]) that the
+/// least-squares similarity must account for: below it the points are taken not to correspond
+/// to the template boundary's, one for one.
+pub const MIN_EXPLAINED_SPREAD: f64 = 0.5;
+
+/// The initial map of a template's boundary onto a target, and what was done, in words.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InitialAlignment {
+    /// The map, a 4×4 world matrix (mm), template → target.
+    pub matrix: Matrix4<f64>,
+    /// The similarity part of it (the whole map when it is a similarity).
+    pub similarity: Matrix4<f64>,
+    /// One line per step, with its figures (scale, anisotropy, overlap or distance before and
+    /// after).
+    pub notes: Vec<String>,
+}
+
+impl InitialAlignment {
+    fn similarity(matrix: Matrix4<f64>, notes: Vec<String>) -> Self {
+        Self {
+            matrix,
+            similarity: matrix,
+            notes,
+        }
+    }
+
+    /// Whether the map is more than [`AFFINE_ANISOTROPY`] from a similarity.
+    pub fn is_affine(&self) -> bool {
+        anisotropy(&self.matrix) > AFFINE_ANISOTROPY
+    }
+}
+
+/// The initial map of the template boundary `boundary` onto `target` (see the module doc);
+/// `spacing` (mm) rasterizes a closed surface.
+pub fn initial_alignment(
+    boundary: &TriMesh,
+    target: &Target,
+    spacing: f64,
+) -> Result<InitialAlignment> {
+    match target {
+        Target::Image { volume, label } => align_to_image(boundary, &volume.foreground(*label)),
+        Target::Points(q) => align_to_points(boundary, q),
+        Target::Surface(mesh) => align_to_surface(boundary, mesh, spacing),
+    }
+}
+
+fn align_to_image(boundary: &TriMesh, mask: &Volume) -> Result<InitialAlignment> {
+    let s = align_similarity(boundary, mask)?;
+    let mut notes = vec![format!(
+        "initial similarity: scale {:.4}, voxel Dice {:.3} → {:.3}",
+        s.scale, s.voxel_dice_before, s.voxel_dice
+    )];
+    let carried = boundary.carried(&s.matrix);
+    let a = align_affine(&carried, mask)?;
+    if anisotropy(&a.matrix) <= AFFINE_ANISOTROPY {
+        return Ok(InitialAlignment::similarity(s.matrix, notes));
+    }
+    notes.push(format!(
+        "initial affine: anisotropy {:.1} %, voxel Dice {:.3} → {:.3}",
+        100.0 * anisotropy(&(a.matrix * s.matrix)),
+        a.voxel_dice_before,
+        a.voxel_dice
+    ));
+    Ok(InitialAlignment {
+        matrix: a.matrix * s.matrix,
+        similarity: s.matrix,
+        notes,
+    })
+}
+
+fn align_to_points(boundary: &TriMesh, q: &[Vec3]) -> Result<InitialAlignment> {
+    let similarity = similarity_between(boundary.points(), q)?;
+    let by_similarity = carry_points(boundary.points(), &similarity);
+    let explained = explained_spread(&by_similarity, q);
+    if explained.is_nan() || explained < MIN_EXPLAINED_SPREAD {
+        return Err(Error::NoCorrespondence {
+            explained,
+            minimum: MIN_EXPLAINED_SPREAD,
+        });
+    }
+    let rms = |moved: &[Vec3]| {
+        let sum: f64 = moved
+            .iter()
+            .zip(q)
+            .map(|(a, b)| (a - b).norm_squared())
+            .sum();
+        (sum / q.len() as f64).sqrt()
+    };
+    let rms_similarity = rms(&by_similarity);
+    let mut notes = Vec::new();
+    let affine = match affine_between(boundary.points(), q) {
+        Ok(affine) => Some(affine).filter(|a| anisotropy(a) > AFFINE_ANISOTROPY),
+        Err(e) => {
+            notes.push(format!(
+                "no initial affine map, the similarity alone: {e}"
+            ));
+            None
+        }
+    };
+    let Some(affine) = affine else {
+        notes.push(format!(
+            "initial similarity: rms distance {rms_similarity:.3} mm, {:.1} % of the points' \
+             spread explained",
+            100.0 * explained
+        ));
+        return Ok(InitialAlignment::similarity(similarity, notes));
+    };
+    notes.push(format!(
+        "initial affine: anisotropy {:.1} %, rms distance {rms_similarity:.3} mm (similarity, \
+         {:.1} % of the points' spread explained) → {:.3} mm",
+        100.0 * anisotropy(&affine),
+        100.0 * explained,
+        rms(&carry_points(boundary.points(), &affine))
+    ));
+    Ok(InitialAlignment {
+        matrix: affine,
+        similarity,
+        notes,
+    })
+}
+
+fn align_to_surface(boundary: &TriMesh, mesh: &TriMesh, spacing: f64) -> Result<InitialAlignment> {
+    if let Err(defect) = check_closed_oriented_manifold(mesh).and_then(|_| check_outward(mesh)) {
+        return Ok(InitialAlignment::similarity(
+            Matrix4::identity(),
+            vec![format!(
+                "no initial alignment: the surface is not a closed outward mesh ({defect})"
+            )],
+        ));
+    }
+    let (dims, grid) = grid_around(mesh, spacing, 2.0 * spacing)?;
+    let mask = rasterize(mesh, dims, grid)?;
+    align_to_image(boundary, &mask)
+}
+
+/// A template carried by its initial alignment, ready for a fit to start from.
+#[derive(Clone, Debug)]
+pub struct AlignedTemplate {
+    /// The template the fit starts from.
+    pub template: MedialTemplate,
+    /// The map it was carried by (the alignment's, or its similarity when the affine map could
+    /// not be followed by a projection).
+    pub matrix: Matrix4<f64>,
+    /// One line per step (the projection's figures; a fallback and its reason).
+    pub notes: Vec<String>,
+}
+
+/// Carries `template` by `alignment`. A map that is not a similarity breaks the medial
+/// constraints: the carried template is projected back onto them ([`project`]); where that
+/// fails, the similarity alone is taken (a similarity keeps a medial template medial). A
+/// template that is not medial as given (an inflated sheet before its projection) is projected
+/// too, and taken as it is when that fails (noted).
+pub fn align_template(
+    template: &MedialTemplate,
+    alignment: &InitialAlignment,
+) -> Result<AlignedTemplate> {
+    let mut notes = Vec::new();
+    let options = ProjectOptions::default();
+    let mut matrix = alignment.matrix;
+    let affine = alignment.is_affine();
+    let mut carried = template.with_landmarks(&carry_points(template.landmarks(), &matrix))?;
+    let medial = ConstraintFigures::of(
+        &carried,
+        &MedialConstraints::new(&carried),
+        carried.landmarks(),
+    )
+    .meets(&options);
+    if affine || !medial {
+        let why = if affine {
+            "after the affine map"
+        } else {
+            "as given"
+        };
+        match project(&carried, &options) {
+            Ok(projection) => {
+                notes.push(format!(
+                    "template projected onto its constraints {why}: {:.3}° / {:.3} % → {:.3}° / \
+                     {:.3} %, landmarks moved ≤ {:.3} mm (rms {:.3} mm)",
+                    projection.before.max_spoke_normal_deg,
+                    100.0 * projection.before.max_mismatch,
+                    projection.after.max_spoke_normal_deg,
+                    100.0 * projection.after.max_mismatch,
+                    projection.max_displacement,
+                    projection.rms_displacement
+                ));
+                carried = projection.template;
+            }
+            Err(e) if affine => {
+                notes.push(format!(
+                    "the initial affine map (anisotropy {:.1} %) cannot be followed by a \
+                     projection onto the medial constraints ({e}): the similarity alone is taken",
+                    100.0 * anisotropy(&matrix)
+                ));
+                matrix = alignment.similarity;
+                let similar = InitialAlignment::similarity(matrix, Vec::new());
+                let aligned = align_template(template, &similar)?;
+                notes.extend(aligned.notes);
+                carried = aligned.template;
+            }
+            Err(e) => notes.push(format!(
+                "the template is not medial and its projection failed: {e}"
+            )),
+        }
+    }
+    Ok(AlignedTemplate {
+        template: carried,
+        matrix,
+        notes,
+    })
+}

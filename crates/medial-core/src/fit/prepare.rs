@@ -1,0 +1,283 @@
+//! A stage of a [`FitSpec`](crate::fit::FitSpec) made ready to run against its data: the
+//! attachment built from the [`Target`] (the image smoothed, the varifold width chosen), the
+//! medial constraints in the stage's units, the μ schedule and the L-BFGS options; and the
+//! figures a fit reports of the data term (voxel overlap, distance to the surface).
+//!
+//! ```
+//! use medial_core::fit::{AttachmentSpec, PreparedStage, StageSpec, Target};
+//! use medial_core::memory::MemoryLimit;
+//! use medial_core::model::Model;
+//! use medial_core::testing::meshes::octahedron;
+//! use medial_core::TriMesh;
+//! let (points, triangles) = octahedron();
+//! let mesh = TriMesh::new(points, triangles).unwrap();
+//! let targets = Target::Points(mesh.points().iter().map(|p| p * 1.1).collect());
+//! let model = Model::Plain(mesh);
+//! let stage = StageSpec::new("points", AttachmentSpec::Ssd);
+//! let prepared = PreparedStage::new(&stage, &model, targets, MemoryLimit::none()).unwrap();
+//! assert!(prepared.constraints.is_none());
+//! assert_eq!(prepared.data_weight, 1.0);
+//! ```
+
+use crate::attachment::dice::{DiceAttachment, DiceParams};
+use crate::attachment::ssd::Ssd;
+use crate::attachment::varifold::{Varifold, VarifoldParams};
+use crate::attachment::Attachment;
+use crate::fit::augmented_lagrangian::AlSchedule;
+use crate::fit::optimize::LbfgsOptions;
+use crate::fit::spec::{AttachmentSpec, DiceSpec, StageSpec, VarifoldSpec};
+use crate::image::rasterize::voxel_dice;
+use crate::image::volume::Volume;
+use crate::memory::{Estimate, MemoryLimit};
+use crate::mesh::distance::SurfaceDistance;
+use crate::mesh::Bounds;
+use crate::model::constraints::MedialConstraints;
+use crate::model::Model;
+use crate::{Error, Result, TriMesh, Vec3};
+
+/// What a stage is fitted to, in memory.
+#[derive(Clone, Debug)]
+pub enum Target {
+    /// Points in correspondence with the template's boundary points (same count and order):
+    /// an SSD stage.
+    Points(Vec<Vec3>),
+    /// An image whose foreground a Dice stage fits.
+    Image {
+        /// The image.
+        volume: Volume,
+        /// The foreground's label (none: every voxel > 0).
+        label: Option<f64>,
+    },
+    /// A surface without correspondence (any vertex count and order): a varifold stage.
+    Surface(TriMesh),
+}
+
+impl Target {
+    /// What the target is, in words (`points`, `an image`, `a surface`).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Target::Points(_) => "points",
+            Target::Image { .. } => "an image",
+            Target::Surface(_) => "a surface",
+        }
+    }
+}
+
+/// A stage ready to run.
+pub struct PreparedStage {
+    /// The data term.
+    pub attachment: Box<dyn Attachment>,
+    /// Its weight `w_data` (a varifold's divided by the target's squared norm).
+    pub data_weight: f64,
+    /// SSD targets, to report the mean distance.
+    pub ssd: Option<Ssd>,
+    /// Dice stages: the binary foreground of the image (before smoothing), to report the voxel
+    /// overlap of the rasterized model.
+    pub mask: Option<Volume>,
+    /// Varifold stages: the target surface, to report the distance of the model's boundary to it.
+    pub surface: Option<SurfaceDistance>,
+    /// Varifold stages: the kernel width in use, mm (given, or chosen from the target surface).
+    pub varifold_width: Option<f64>,
+    /// The medial constraints, when they apply.
+    pub constraints: Option<MedialConstraints>,
+    /// The μ schedule.
+    pub schedule: AlSchedule,
+    /// L-BFGS options.
+    pub lbfgs: LbfgsOptions,
+}
+
+impl PreparedStage {
+    /// Prepares `stage` for `model` against `target`. A Dice stage past `memory`
+    /// ([`Estimate::dice`]) is refused before its image is refined or smoothed; so is an image
+    /// whose foreground no sample of the template's interior sees.
+    pub fn new(
+        stage: &StageSpec,
+        model: &Model,
+        target: Target,
+        memory: MemoryLimit,
+    ) -> Result<Self> {
+        let constrained = stage.constraints.unwrap_or(model.medial().is_some());
+        if constrained && model.medial().is_none() {
+            return Err(Error::NeedsMedial("constraints = true"));
+        }
+        let weight = stage.data_weight();
+        let (mut ssd, mut mask, mut surface, mut varifold_width) = (None, None, None, None);
+        let wrong = || Error::WrongTarget {
+            attachment: stage.attachment.name(),
+            target: target.kind(),
+        };
+        let (attachment, data_weight): (Box<dyn Attachment>, _) = match (&stage.attachment, &target)
+        {
+            (AttachmentSpec::Ssd, Target::Points(_)) => {
+                let Target::Points(points) = target else {
+                    unreachable!("matched above")
+                };
+                let expected = model.boundary_count();
+                if points.len() != expected {
+                    return Err(Error::PointCount {
+                        expected,
+                        found: points.len(),
+                    });
+                }
+                let points = Ssd::new(points)?;
+                (Box::new(ssd.insert(points).clone()), weight)
+            }
+            (AttachmentSpec::Dice(spec), Target::Image { .. }) => {
+                let Target::Image { volume, label } = target else {
+                    unreachable!("matched above")
+                };
+                let (dice, foreground) = dice(spec, model, volume, label, memory)?;
+                mask = Some(foreground);
+                (Box::new(dice), weight)
+            }
+            (AttachmentSpec::Varifold(spec), Target::Surface(mesh)) => {
+                let varifold = varifold(spec, model, mesh)?;
+                surface = Some(SurfaceDistance::new(mesh)?);
+                varifold_width = Some(varifold.width());
+                let weight = weight / varifold.target_norm2();
+                (Box::new(varifold), weight)
+            }
+            _ => return Err(wrong()),
+        };
+        let constraints = match model.medial().filter(|_| constrained) {
+            Some(template) => Some(MedialConstraints::with_units(
+                template,
+                stage.constraint_units,
+            )?),
+            None => None,
+        };
+        Ok(Self {
+            data_weight,
+            attachment,
+            ssd,
+            mask,
+            surface,
+            varifold_width,
+            constraints,
+            schedule: stage.schedule,
+            lbfgs: stage.lbfgs,
+        })
+    }
+
+    /// Dice stages: the voxel overlap of the model's boundary at landmarks `q` (rasterized on
+    /// the image's grid) with the image's foreground.
+    pub fn voxel_dice(&self, model: &Model, q: &[Vec3]) -> Result<Option<f64>> {
+        let (Some(mask), Some(template)) = (&self.mask, model.medial()) else {
+            return Ok(None);
+        };
+        let boundary = TriMesh::new(
+            q[..template.boundary_count()].to_vec(),
+            template.boundary_triangles().to_vec(),
+        )?;
+        Ok(Some(voxel_dice(&boundary, mask)?))
+    }
+
+    /// Varifold stages: the mean distance of the model's boundary at landmarks `q` to the
+    /// target surface, mm.
+    pub fn surface_distance(&self, model: &Model, q: &[Vec3]) -> Option<f64> {
+        self.surface
+            .as_ref()
+            .map(|s| s.mean_distance(&q[..model.boundary_count()]))
+    }
+
+    /// SSD stages: the mean distance of the model's boundary at landmarks `q` to its targets, mm.
+    pub fn ssd_distance(&self, q: &[Vec3]) -> Option<f64> {
+        self.ssd.as_ref().map(|s| s.mean_distance(q))
+    }
+}
+
+/// The varifold attachment of the model's boundary against `target`.
+fn varifold(spec: &VarifoldSpec, model: &Model, target: &TriMesh) -> Result<Varifold> {
+    let params = VarifoldParams {
+        kind: spec.kind,
+        width: spec.width,
+    };
+    Varifold::new(
+        model.boundary_triangles(),
+        model.landmarks().len(),
+        target,
+        params,
+    )
+}
+
+/// Voxels kept around the foreground when an image is refined: the reach of the smoothing
+/// (4 σ) and two voxels more.
+fn refine_margin(spec: &DiceSpec, volume: &Volume) -> usize {
+    (4.0 * spec.image_sigma / volume.spacing().min()).ceil() as usize + 2
+}
+
+/// The Dice attachment of the model against the foreground of `volume`, smoothed, and the
+/// foreground itself (before smoothing).
+fn dice(
+    spec: &DiceSpec,
+    model: &Model,
+    volume: Volume,
+    label: Option<f64>,
+    memory: MemoryLimit,
+) -> Result<(DiceAttachment, Volume)> {
+    if spec.image_refine > 1 && label.is_some() {
+        return Err(Error::InvalidParameter(
+            "image_refine interpolates intensities: it does not apply to a label".into(),
+        ));
+    }
+    let template = model.medial().ok_or(Error::NeedsMedial(
+        "the dice attachment (its interior is sampled between boundary and medial sheet)",
+    ))?;
+    let margin = refine_margin(spec, &volume);
+    let refined_voxels: usize = match spec.image_refine {
+        1 => 0,
+        f => volume.refined_dims(f, margin).iter().product(),
+    };
+    let estimate = Estimate::dice(
+        spec.subdivision,
+        spec.layers,
+        template.boundary_triangles().len(),
+        template.landmark_count(),
+        volume.data().len() + refined_voxels,
+    );
+    memory.check(&estimate, || "the Dice attachment".into())?;
+    let mask = volume.foreground(label);
+    let fine = match spec.image_refine {
+        1 => None,
+        f => Some(volume.refined(f, margin)?.foreground(label)),
+    };
+    drop(volume); // Not needed past its masks: freed before the smoothing copies.
+    let image = fine
+        .as_ref()
+        .unwrap_or(&mask)
+        .smoothed(spec.image_sigma)
+        .map_err(|e| Error::Setting {
+            setting: "image_sigma",
+            source: Box::new(e),
+        })?;
+    drop(fine);
+    let medial_of: Vec<usize> = template
+        .medial_index()
+        .iter()
+        .map(|&m| template.atom_landmark(m))
+        .collect();
+    let params = DiceParams {
+        subdivision: spec.subdivision,
+        layers: spec.layers,
+    };
+    let attachment = DiceAttachment::new(
+        template.boundary_triangles(),
+        &medial_of,
+        template.landmark_count(),
+        image,
+        params,
+    )?;
+    if attachment.dice(template.landmarks(), None)?.overlap <= 0.0 {
+        // The attachment has refused an empty foreground, the template has boundary points.
+        let foreground = mask
+            .support_bounds()
+            .ok_or_else(|| Error::InvalidVolume("the image has no foreground voxel".into()))?;
+        let template = Bounds::of(template.boundary_points())
+            .ok_or_else(|| Error::InvalidTemplate("the template has no boundary point".into()))?;
+        return Err(Error::NoOverlap {
+            foreground: Box::new(foreground),
+            template: Box::new(template),
+        });
+    }
+    Ok((attachment, mask))
+}

@@ -1,0 +1,191 @@
+//! A whole fit made ready and run in memory: the model it starts from, the flow of a
+//! [`FitSpec`], each stage prepared against its data, and the fold guard each stage needs
+//! ([`Fit`]); and the automatic fit of a template to one target, its plan and initial alignment
+//! included ([`automatic`]), which is what `medial fit --template T --image SEG` runs.
+//!
+//! ```no_run
+//! use medial_core::fit::{run::automatic, Target};
+//! use medial_core::memory::MemoryLimit;
+//! use medial_core::model::Model;
+//! # fn read() -> (medial_core::MedialTemplate, medial_core::image::Volume) { unimplemented!() }
+//! let (template, segmentation) = read();
+//! let target = Target::Image { volume: segmentation, label: None };
+//! let start = automatic(&Model::Medial(Box::new(template)), &target).unwrap();
+//! let fit = start.fit(target, MemoryLimit::none()).unwrap();
+//! let outcomes = fit.run(|_| {}).unwrap();
+//! let fitted = fit.flow().shoot(fit.model().landmarks(), &outcomes.last().unwrap().momenta);
+//! ```
+
+use crate::fit::augmented_lagrangian::{Stage, StageOutcome};
+use crate::fit::guard::Guard;
+use crate::fit::initial::{align_template, initial_alignment, InitialAlignment};
+use crate::fit::objective::ConstraintSet;
+use crate::fit::plan::{self, Geometry};
+use crate::fit::prepare::{PreparedStage, Target};
+use crate::fit::spec::FitSpec;
+use crate::fit::stages::{run_stages, FitEvent, PlannedStage};
+use crate::flow::Flow;
+use crate::memory::MemoryLimit;
+use crate::model::Model;
+use crate::synth::PrincipalAxes;
+use crate::Result;
+use nalgebra::Matrix4;
+
+/// A fit ready to run: the model it starts from, its flow and its prepared stages.
+pub struct Fit {
+    model: Model,
+    flow: Flow,
+    stages: Vec<PreparedStage>,
+    prisms: Guard,
+    surface: Guard,
+}
+
+impl Fit {
+    /// The fit of `model` by `flow` through `stages` (prepared for `model`).
+    pub fn new(model: Model, flow: Flow, stages: Vec<PreparedStage>) -> Self {
+        let (prisms, surface) = (Guard::new(&model), Guard::of_surface(&model));
+        Self {
+            model,
+            flow,
+            stages,
+            prisms,
+            surface,
+        }
+    }
+
+    /// The fit of `spec` for `model`, each stage against its target (one per stage), within
+    /// `memory` ([`FitSpec::flow_estimate`], [`PreparedStage::new`]).
+    pub fn prepare(
+        spec: &FitSpec,
+        model: Model,
+        targets: Vec<Target>,
+        memory: MemoryLimit,
+    ) -> Result<Self> {
+        spec.check()?;
+        if targets.len() != spec.stages.len() {
+            return Err(crate::Error::ShapeMismatch {
+                what: "targets of the stages of a fit".into(),
+                expected: spec.stages.len(),
+                found: targets.len(),
+            });
+        }
+        let k = model.landmarks().len();
+        memory.check(&spec.flow_estimate(k), || {
+            format!(
+                "a fit of {} time steps × {k} landmarks",
+                spec.flow.time_steps
+            )
+        })?;
+        let flow = spec.flow.flow(k)?;
+        let stages = spec
+            .stages
+            .iter()
+            .zip(targets)
+            .map(|(stage, target)| PreparedStage::new(stage, &model, target, memory))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self::new(model, flow, stages))
+    }
+
+    /// The model the fit starts from.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// The flow.
+    pub fn flow(&self) -> &Flow {
+        &self.flow
+    }
+
+    /// The prepared stages.
+    pub fn stages(&self) -> &[PreparedStage] {
+        &self.stages
+    }
+
+    /// The stages as the engine runs them ([`crate::fit::run_stages_resumable`]). Constrained
+    /// and Dice stages rely on the medial points staying inside (Dice samples the prisms): their
+    /// guard is the prisms' ([`Guard::new`]); the others only rely on the boundary surface
+    /// ([`Guard::of_surface`]).
+    pub fn planned(&self) -> Vec<PlannedStage<'_>> {
+        self.stages
+            .iter()
+            .map(|p| PlannedStage {
+                stage: Stage {
+                    flow: &self.flow,
+                    initial: self.model.landmarks(),
+                    attachment: p.attachment.as_ref(),
+                    data_weight: p.data_weight,
+                    constraints: p.constraints.as_ref().map(|c| c as &dyn ConstraintSet),
+                    guard: Some(if p.constraints.is_some() || p.mask.is_some() {
+                        &self.prisms
+                    } else {
+                        &self.surface
+                    }),
+                },
+                schedule: p.schedule,
+                lbfgs: p.lbfgs,
+            })
+            .collect()
+    }
+
+    /// Runs the stages in order ([`run_stages`]); `report` sees every L-BFGS iteration and the
+    /// end of every stage. The last outcome holds the fit's momenta.
+    pub fn run(&self, report: impl FnMut(FitEvent<'_>)) -> Result<Vec<StageOutcome>> {
+        run_stages(&self.planned(), report)
+    }
+}
+
+/// Where an automatic fit starts: its plan, and the template carried by the initial alignment.
+pub struct AutomaticStart {
+    /// The fit's settings ([`plan::automatic`]).
+    pub spec: FitSpec,
+    /// The template the fit starts from: the given one carried by [`AutomaticStart::alignment`]
+    /// (a medial template projected back onto its constraints after an affine map).
+    pub model: Model,
+    /// The initial map, template → subject.
+    pub alignment: Matrix4<f64>,
+    /// What the alignment did, one line per step.
+    pub notes: Vec<String>,
+}
+
+impl AutomaticStart {
+    /// The fit from this start against `target` (every stage of an automatic plan fits the
+    /// one target).
+    pub fn fit(self, target: Target, memory: MemoryLimit) -> Result<Fit> {
+        let targets = vec![target; self.spec.stages.len()];
+        Fit::prepare(&self.spec, self.model, targets, memory)
+    }
+}
+
+/// The automatic fit of `model` to `target`: the plan chosen from the data
+/// ([`plan::automatic`], from the model as given) and the initial alignment
+/// ([`initial_alignment`]; a medial template carried by [`align_template`], a plain mesh by the
+/// whole map). Voxels for rasterizing a closed surface to align to: half the mean spoke
+/// ([`Geometry::alignment_spacing`]), or a 128th of a plain mesh's long extent.
+pub fn automatic(model: &Model, target: &Target) -> Result<AutomaticStart> {
+    let spec = plan::automatic(model, target)?;
+    let (alignment, start): (InitialAlignment, Model) = match model {
+        Model::Medial(template) => {
+            let boundary = template.boundary_mesh()?;
+            let axes = PrincipalAxes::of(boundary.points())?;
+            let spacing = Geometry::of(template, &boundary, &axes).alignment_spacing();
+            let alignment = initial_alignment(&boundary, target, spacing)?;
+            let aligned = align_template(template, &alignment)?;
+            let mut alignment = alignment;
+            alignment.notes.extend(aligned.notes);
+            alignment.matrix = aligned.matrix;
+            (alignment, Model::Medial(Box::new(aligned.template)))
+        }
+        Model::Plain(mesh) => {
+            let axes = PrincipalAxes::of(mesh.points())?;
+            let alignment = initial_alignment(mesh, target, axes.extent.z / 128.0)?;
+            let carried = mesh.carried(&alignment.matrix);
+            (alignment, Model::Plain(carried))
+        }
+    };
+    Ok(AutomaticStart {
+        spec,
+        model: start,
+        alignment: alignment.matrix,
+        notes: alignment.notes,
+    })
+}
