@@ -1,0 +1,46 @@
+//! # medial-stats
+//!
+//! Statistics on meshes in correspondence: every subject's measure at the same elements (points
+//! or triangles of one mesh), a general linear model at every element, and inference corrected
+//! over the mesh by permutations (maximum statistic, clusters, TFCE), as cmrep's `meshglm` and
+//! FSL's PALM do it. The formulas are in the project's SPEC §10 and in each module.
+//!
+//! A [`Study`] takes a [`Design`], [`Observations`], the mesh's [`Elements`] and [`Options`];
+//! [`Study::test`] gives a [`ContrastResult`] for each [`Contrast`]. Results are the same bits
+//! for any number of threads.
+//!
+//! ## Contents
+//!
+//! | module | what it holds | entry points |
+//! |---|---|---|
+//! | [`design`] | the design matrix: CSV tables with named and categorical columns, meshglm's whitespace files | [`Design`], [`TableOptions`], [`design::parse_matrix`] |
+//! | [`contrast`] | contrasts by name or vector, F-tests | [`Contrast`] |
+//! | [`glm`] | least squares at every element, t and F, parametric p, missing values | [`Glm`], [`Observations`], [`Tail`] |
+//! | [`permutation`] | Freedman–Lane permutations, seeded or exact, and their maxima | [`Scheme`], [`NullDistributions`] |
+//! | [`mesh`] | element areas and adjacency, clusters, TFCE, heat-diffusion smoothing | [`Mesh`], [`Elements`], [`find_clusters`], [`tfce()`], [`smooth`] |
+//! | [`fdr`] | Benjamini–Hochberg q-values | [`q_values`] |
+//! | [`analysis`] | an analysis from data to maps | [`Study`], [`Options`], [`ContrastResult`] |
+//! | [`error`] | the one error type | [`StatsError`] |
+
+#![warn(missing_docs)]
+
+pub mod analysis;
+pub mod contrast;
+pub mod design;
+pub mod error;
+pub mod fdr;
+pub mod glm;
+pub mod mesh;
+pub mod permutation;
+
+pub use analysis::{ClusterInference, ContrastResult, Options, PermutationSummary, Study};
+pub use contrast::Contrast;
+pub use design::{Design, TableOptions};
+pub use error::{Result, StatsError};
+pub use fdr::q_values;
+pub use glm::{Glm, GlmOptions, Observations, Tail};
+pub use mesh::{
+    diffusion_time, find_clusters, smooth, tfce, Cluster, Clusters, Elements, Mesh, Support,
+    TfceParameters,
+};
+pub use permutation::{NullDistributions, Scheme};

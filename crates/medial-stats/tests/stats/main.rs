@@ -1,0 +1,7 @@
+//! The tests of medial-stats against independent computations: dense least squares, brute-force
+//! enumeration of permutations, and meshglm's test data.
+
+mod common;
+mod glm;
+mod meshglm;
+mod permutation;
