@@ -13,6 +13,7 @@ mod cohort;
 mod commands;
 pub mod config;
 mod error;
+mod fitting;
 mod memory;
 mod output;
 mod progress;

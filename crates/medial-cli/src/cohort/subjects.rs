@@ -7,9 +7,9 @@
 //! fit starts.
 
 use super::RESERVED;
-use crate::commands::fit::{Inputs, Resolved};
 use crate::config::{AttachmentKind, Config};
 use crate::error::CliError;
+use crate::fitting::{Inputs, Resolved};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -41,10 +41,10 @@ pub struct Subject {
 impl Subject {
     /// The config of this subject's fit: `base` with the subject's template and target in
     /// place of the base's, and its transform in place of the base's SSD transforms (see
-    /// [`crate::commands::fit::resolve`]); without a base, the automatic schedule, written to
+    /// [`crate::fitting::resolve`]); without a base, the automatic schedule, written to
     /// `out`.
     pub fn config(&self, base: Option<&Path>, out: &Path) -> Result<Resolved, CliError> {
-        let mut resolved = crate::commands::fit::resolve(base, &self.inputs, out)?;
+        let mut resolved = crate::fitting::resolve(base, &self.inputs, out)?;
         if let Some(transform) = &self.transform {
             for stage in &mut resolved.config.stages {
                 if stage.transform.is_some() {

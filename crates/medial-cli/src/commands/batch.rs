@@ -1,12 +1,12 @@
 //! `medial batch`: fits every subject of a subject table ([`crate::cohort::subjects`]) from one
 //! template into `DIR/SUBJECT/`, in this process, through the same code as `medial fit`
-//! ([`super::fit::resolve`] and [`super::fit::run`]); then gathers the cohort folder
+//! ([`crate::fitting::resolve`] and [`crate::fitting::run`]); then gathers the cohort folder
 //! ([`crate::cohort::gather`]). A subject whose fit ran to its end earlier is skipped, one
 //! stopped by a signal is resumed from its checkpoint, one that fails is recorded in
 //! `DIR/SUBJECT/failed.json` and the others go on. `--shard` (or a Slurm array task) takes
 //! a share of the subjects; `--slurm` writes the scripts of a Slurm job array instead of fitting.
 
-use super::fit::{self, FitOptions, Inputs};
+use crate::fitting::{self, FitOptions, Inputs};
 use crate::cohort::gather::{self, Failure, Gathered, Standing};
 use crate::cohort::shard::Shard;
 use crate::cohort::slurm::{self, SlurmOptions};
@@ -187,7 +187,7 @@ fn fit_one(
             target: None,
             surface: None,
         };
-        fit::resolve(Some(&out.join("config.toml")), &none, out)?
+        fitting::resolve(Some(&out.join("config.toml")), &none, out)?
     } else {
         subject.config(base, out)?
     };
@@ -198,7 +198,7 @@ fn fit_one(
         checkpoint_every: None,
         resume,
     };
-    fit::run(&resolved, &options).map(|_| ())
+    fitting::run(&resolved, &options).map(|_| ())
 }
 
 /// Success, or the error naming the `failed` subjects.

@@ -1,4 +1,5 @@
-//! The commands of `medial`, one module each: [`fit`] and [`eval`] run a TOML schedule;
+//! The commands of `medial`, one module each (`medial fit` wires [`crate::fitting`]): [`eval`]
+//! evaluates a TOML schedule;
 //! [`inflate`], [`project`] and [`synth`] build templates and synthetic cases; [`rasterize`]
 //! turns a closed mesh into a mask; [`report`] writes the views of a fit folder again;
 //! [`check`] measures whether the medial points stay the centres of inscribed balls; [`apply`]
@@ -9,7 +10,6 @@ mod apply;
 mod batch;
 mod check;
 mod eval;
-pub mod fit;
 mod inflate;
 mod project;
 mod rasterize;
@@ -64,7 +64,7 @@ pub enum Command {
         #[arg(long, value_name = "SECONDS", value_parser = positive_seconds)]
         checkpoint_every: Option<Duration>,
         #[command(flatten)]
-        inputs: fit::Inputs,
+        inputs: crate::fitting::Inputs,
     },
     /// Evaluate a stage's objective at given momenta without optimising; prints one JSON object.
     Eval {
@@ -163,10 +163,10 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
                 })
                 .expect("clap requires --out without a config or --resume");
             let config = config.or_else(|| resume.as_ref().map(|dir| dir.join("config.toml")));
-            let resolved = fit::resolve(config.as_deref(), &inputs, &out)?;
-            let summary = fit::run(
+            let resolved = crate::fitting::resolve(config.as_deref(), &inputs, &out)?;
+            let summary = crate::fitting::run(
                 &resolved,
-                &fit::FitOptions {
+                &crate::fitting::FitOptions {
                     out: out.clone(),
                     threads,
                     quiet,
@@ -201,7 +201,7 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
         Command::Inflate(args) => inflate::run(&args)?,
         Command::Project(args) => project::run(&args)?,
         Command::Synth(args) => synth::run(&args)?,
-        Command::Template(args) => template::run(&args, threads, quiet)?,
+        Command::Template(args) => template::run(&args)?,
         Command::Rasterize(args) => rasterize::run(&args)?,
         Command::Report(args) => report::run(&args)?,
         Command::Check(args) => check::run(&args)?,

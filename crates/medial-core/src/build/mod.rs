@@ -1,7 +1,9 @@
 //! Building templates: the medial sheet of a shape ([`skeleton`]), inflation of a medial sheet
 //! into a closed boundary with spokes ([`inflate`](mod@inflate)), and projection of a template
-//! onto its medial constraints ([`project`](mod@project)).
+//! onto its medial constraints ([`project`](mod@project)), and the whole pipeline from a
+//! shape to a template ([`from_shape`]).
 
+pub mod from_shape;
 pub mod inflate;
 pub mod project;
 pub mod skeleton;

@@ -3,8 +3,8 @@
 
 use super::fitted::FittedMap;
 use crate::error::CliError;
-use medial_core::memory::Estimate;
 use medial_core::image::Volume;
+use medial_core::memory::Estimate;
 use medial_core::Vec3;
 use medial_io::nifti_volume::{read_nifti_file, write_nifti, NiftiType};
 

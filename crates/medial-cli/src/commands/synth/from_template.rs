@@ -9,10 +9,10 @@
 //! rasterized warped shape, the affine part and two configs: `fit_boundary.toml` (constrained
 //! SSD to the warped points) and `fit.toml` (the paper's affine SSD → Dice schedule).
 
+use super::{boundary_config, paper_config, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE};
 use super::{target_image, CaseFiles, SynthArgs};
 use crate::error::CliError;
 use crate::output::{model_error, print_json, TemplateSummary};
-use super::{boundary_config, paper_config, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE};
 use medial_core::fit::plan::Geometry;
 use medial_core::mesh::topology::signed_volume;
 use medial_core::synth::{target_boundary, target_surface, PrincipalAxes, Warp};

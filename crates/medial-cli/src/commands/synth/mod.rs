@@ -10,10 +10,10 @@
 
 mod from_template;
 
+use crate::config::{Config, Source};
 use crate::error::CliError;
 use crate::memory;
 use crate::output::{print_json, write_options, write_text, TemplateSummary};
-use crate::config::{Config, Source};
 use medial_core::fit::plan::FitPlan;
 use medial_core::image::rasterize::grid_around;
 use medial_core::image::volume::Volume;

@@ -1,5 +1,7 @@
-//! `medial fit`: runs the stages of a config (the engine's [`run_stages_resumable`]), pausing
-//! for checkpoints and signals, and writes the results as one set.
+//! A fit run and written: the config resolved from a file or chosen by the engine
+//! ([`resolve`]), its stages run by the engine ([`run_stages_resumable`]) with pauses for
+//! checkpoints and signals, and its results written as one set ([`run`]). `medial fit` runs
+//! one; `medial batch` one per subject.
 
 use crate::checkpoint::{self, Fingerprint, Saved};
 use crate::config::{AttachmentKind, Config, Source, StageConfig};
@@ -13,8 +15,8 @@ use crate::stage::{self, flow_of};
 use crate::summary::{Figures, StageSummary, Status, Summary};
 use crate::time_points::{self, time_points};
 use medial_core::fit::{
-    run_stages_resumable, Checkpoint, FitEvent, FitRun, PlannedStage, PreparedStage,
-    StageOutcome, Target,
+    run_stages_resumable, Checkpoint, FitEvent, FitRun, PlannedStage, PreparedStage, StageOutcome,
+    Target,
 };
 use medial_core::flow::{Flow, Trajectory, STRAIN_LIMIT};
 use medial_core::model::Model;
@@ -147,7 +149,8 @@ fn automatic(inputs: &Inputs, out: &Path) -> Result<Resolved, CliError> {
     for note in &start.notes {
         tracing::info!("{note}");
     }
-    let template = std::path::absolute(out.join(ALIGNED_TEMPLATE)).map_err(|e| CliError::io(out, e))?;
+    let template =
+        std::path::absolute(out.join(ALIGNED_TEMPLATE)).map_err(|e| CliError::io(out, e))?;
     let sources = vec![source; start.spec.stages.len()];
     Ok(Resolved {
         config: Config::of_spec(&start.spec, template, sources),

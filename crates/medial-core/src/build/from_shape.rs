@@ -1,0 +1,503 @@
+//! A medial template from a shape (a segmentation or a closed mesh), built as the paper builds
+//! one by hand, automatically (docs/method.md §9.3):
+//! 1. the shape as a mask on a grid fine enough for its thinnest wall (a third of the 10th
+//!    percentile of the half thicknesses found on a first, coarser grid);
+//! 2. its medial sheet with a radius per vertex ([`sheet_of_mask`]);
+//! 3. one Loop subdivision, inflation and projection onto the medial constraints;
+//! 4. the automatic constrained Dice fit of that template to the mask itself
+//!    ([`crate::fit::run::automatic`]), then projection again, so that the template matches its
+//!    shape and its constraints hold to the projection's tolerance.
+//!
+//! ```no_run
+//! use medial_core::build::from_shape::{template_of_shape, Shape, TemplateOptions};
+//! use medial_core::memory::MemoryLimit;
+//! # fn segmentation() -> medial_core::image::Volume { unimplemented!() }
+//! let shape = Shape::of_segmentation(&segmentation(), None);
+//! let built = template_of_shape(&shape, &TemplateOptions::default(), MemoryLimit::none()).unwrap();
+//! assert!(built.figures.verdict().is_ok());
+//! ```
+
+use crate::build::inflate::{inflate, self_intersections, MedialSheet};
+use crate::build::project::{project, ProjectOptions};
+use crate::build::skeleton::chart::ChartKind;
+use crate::build::skeleton::{medial_points, sheet_of_mask, Sampling, ShapeSheet, MIN_FEATURE_ANGLE_DEG};
+use crate::fit::run::automatic;
+use crate::fit::Target;
+use crate::image::rasterize::{grid_around, grid_around_bounds, rasterize, voxel_dice};
+use crate::image::Volume;
+use crate::memory::{Estimate, MemoryLimit};
+use crate::mesh::topology::{check_closed_oriented_manifold, check_outward};
+use crate::mesh::Bounds;
+use crate::model::template::MAX_SPOKES;
+use crate::model::{MedialTemplate, Model, SpokeMetrics, TemplateSummary};
+use crate::{Error, Result, TriMesh};
+use serde::Serialize;
+
+/// Atoms of a template when neither a count nor a spacing is given.
+pub const DEFAULT_ATOMS: usize = 300;
+/// Most voxels of the fine grid.
+pub const MAX_VOXELS: usize = 32_000_000;
+/// The fine voxel is this fraction of the thin half thickness: a wall is at least six voxels
+/// across, so that its two sides' ridge points are told apart.
+const VOXELS_PER_RADIUS: f64 = 3.0;
+/// Percentile of the half thicknesses taken as the thin wall (the thinnest few are noise of
+/// the coarse grid).
+const THIN_PERCENTILE: f64 = 0.10;
+/// Grid margin around the shape, voxels.
+const MARGIN_VOXELS: f64 = 3.0;
+/// Voxels along the longest side of a mesh's first, coarse grid.
+const COARSE_VOXELS: f64 = 96.0;
+/// The Dice of a template against its shape that counts as matching it.
+pub const TARGET_DICE: f64 = 0.95;
+/// The largest spoke–normal angle of a finished template, degrees.
+pub const MAX_ANGLE_DEG: f64 = 0.1;
+/// The largest spoke mismatch of a finished template, %.
+pub const MAX_MISMATCH_PCT: f64 = 0.1;
+
+/// A shape to build a template of.
+#[derive(Clone, Debug)]
+pub enum Shape {
+    /// A binary mask on the input's grid (1 inside), and the input itself when it is a graded
+    /// signed image read without a label (a level set, foreground `v > 0`): the fine grid then
+    /// follows the zero crossing of its trilinear interpolant, not the whole voxels of the mask.
+    Mask(Box<Volume>, Option<Box<Volume>>),
+    /// A closed triangle mesh (mm).
+    Mesh(TriMesh),
+}
+
+impl Shape {
+    /// The shape of a segmentation: its foreground (`label`, or every voxel > 0), following the
+    /// zero crossing of a graded signed image read without a label.
+    pub fn of_segmentation(image: &Volume, label: Option<f64>) -> Self {
+        let mask = Box::new(image.foreground(label));
+        let graded = (label.is_none() && image.is_graded_signed()).then(|| Box::new(image.clone()));
+        Self::Mask(mask, graded)
+    }
+
+    /// The voxel of the first, coarse grid: half the input's smallest voxel, or a
+    /// [`COARSE_VOXELS`]th of a mesh's longest side.
+    fn coarse_voxel(&self) -> Result<f64> {
+        Ok(match self {
+            Self::Mask(mask, _) => mask.spacing().min() / 2.0,
+            Self::Mesh(_) => self.bounds()?.extent().max() / COARSE_VOXELS,
+        })
+    }
+
+    /// The shape as a mask (1 inside) on an axis-aligned grid of voxel `h` with
+    /// [`MARGIN_VOXELS`] around it: the mesh rasterized, or the mask sampled trilinearly and
+    /// cut at ½. Refused past [`MAX_VOXELS`] or `memory`.
+    pub fn on_grid(&self, h: f64, memory: MemoryLimit) -> Result<Volume> {
+        let margin = MARGIN_VOXELS * h;
+        let (dims, to_world) = match self {
+            Self::Mesh(mesh) => grid_around(mesh, h, margin),
+            Self::Mask(..) => grid_around_bounds(&self.bounds()?, h, margin),
+        }?;
+        let voxels: usize = dims.iter().product();
+        if voxels > MAX_VOXELS {
+            return Err(Error::InvalidParameter(format!(
+                "a grid of {h:.3} mm voxels around the shape is {}×{}×{} = {voxels} voxels, \
+                 more than {MAX_VOXELS}; give a larger voxel",
+                dims[0], dims[1], dims[2]
+            )));
+        }
+        memory.check(&Estimate::grid(dims), || {
+            let voxels: f64 = dims.map(|n| n as f64).iter().product();
+            format!(
+                "a {}×{}×{} grid ({voxels:.2e} voxels)",
+                dims[0], dims[1], dims[2]
+            )
+        })?;
+        match self {
+            Self::Mesh(mesh) => rasterize(mesh, dims, to_world),
+            Self::Mask(mask, graded) => {
+                let (image, cut) = match graded {
+                    Some(graded) => (graded, 0.0),
+                    None => (mask, 0.5),
+                };
+                image.resampled(dims, to_world).and_then(|v| {
+                    let data = v.data().iter().map(|&x| f64::from(u8::from(x > cut)));
+                    Volume::new(dims, data.collect(), to_world)
+                })
+            }
+        }
+    }
+
+    /// The bounding box of the shape (the mask's foreground voxels, or the mesh's points).
+    pub fn bounds(&self) -> Result<Bounds> {
+        match self {
+            Self::Mask(mask, _) => mask.support_bounds(),
+            Self::Mesh(mesh) => Bounds::of(mesh.points()),
+        }
+        .ok_or_else(|| Error::InvalidParameter("the shape is empty".into()))
+    }
+}
+
+/// How to build a template of a shape.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TemplateOptions {
+    /// How densely the sheet is sampled.
+    pub sampling: Sampling,
+    /// Voxel size of the grid the medial sheet is found on, mm (none: a third of the thin half
+    /// thickness, at most the input's half voxel).
+    pub voxel: Option<f64>,
+    /// Fit the projected inflation to the shape (step 4).
+    pub fit: bool,
+}
+
+impl Default for TemplateOptions {
+    fn default() -> Self {
+        Self {
+            sampling: Sampling::Atoms(DEFAULT_ATOMS),
+            voxel: None,
+            fit: true,
+        }
+    }
+}
+
+/// A template built from a shape, with what it was built from.
+pub struct BuiltTemplate {
+    /// The template.
+    pub template: MedialTemplate,
+    /// The medial sheet found, with how it was sampled.
+    pub found: ShapeSheet,
+    /// The shape on the grid the sheet was found on.
+    pub mask: Volume,
+    /// Its figures.
+    pub figures: TemplateFigures,
+    /// A fit to the shape that stopped where the model would fold: its last sound iterate was
+    /// kept (the figures say whether it meets the targets).
+    pub fit_stopped_early: Option<String>,
+}
+
+/// The figures of a template built from a shape.
+#[derive(Clone, Debug, Serialize)]
+pub struct TemplateFigures {
+    /// Voxel of the grid the sheet was found on, mm.
+    pub voxel_mm: f64,
+    /// The voxel the thinnest wall asked for, mm, when the grid had to be coarser to stay within
+    /// the voxel and memory limits (none: it is the voxel used).
+    pub voxel_wanted_mm: Option<f64>,
+    /// Dimensions of that grid.
+    pub grid_dims: [usize; 3],
+    /// Medial points found (ridge voxel pairs).
+    pub medial_points: usize,
+    /// Per sheet, the chart it was sampled in: sphere (a bowl) or plane.
+    pub chart: Vec<ChartKind>,
+    /// Per sheet, the rows of its lattice hexagon either side of its middle row.
+    pub rings: Vec<usize>,
+    /// Per sheet, how many edges its hexagon is stretched by (0: regular, a round sheet).
+    pub stretch: Vec<usize>,
+    /// Sheets of the medial points (stitched along the seams).
+    pub sheets: usize,
+    /// Seams of the medial points.
+    pub seams: usize,
+    /// Voxel Dice of the template against the shape on the fine grid.
+    pub dice: f64,
+    /// Voxel Dice against the input segmentation on its own grid (segmentations only).
+    pub dice_input_grid: Option<f64>,
+    /// Whether the figures meet the targets: Dice ≥ [`TARGET_DICE`], constraints ≤
+    /// [`MAX_ANGLE_DEG`] and ≤ [`MAX_MISMATCH_PCT`], closed, manifold, outward, no
+    /// self-intersection.
+    pub meets_targets: bool,
+    /// Largest spoke–normal angle, degrees.
+    pub max_spoke_normal_deg: f64,
+    /// Largest spoke mismatch, %.
+    pub max_spoke_mismatch_pct: f64,
+    /// Atoms.
+    pub atoms: usize,
+    /// Atoms with 1, 2 and 3 spokes (free edge, sheet, seam).
+    pub atoms_by_spokes: [usize; MAX_SPOKES],
+    /// Smallest and largest local thickness (2 × mean spoke), mm.
+    pub thickness_mm: [f64; 2],
+    /// The boundary is a closed oriented manifold.
+    pub closed_manifold: bool,
+    /// The boundary is oriented outward.
+    pub outward: bool,
+    /// The boundary does not intersect itself.
+    pub self_intersection_free: bool,
+    /// Dice of the projected inflation before the fit to the shape.
+    pub dice_before_fit: f64,
+    /// Largest landmark move of the final projection, mm.
+    pub final_projection_move_mm: f64,
+    /// The template's summary.
+    pub summary: TemplateSummary,
+}
+
+/// What is wrong with a built template.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Verdict {
+    /// Its boundary is not sound: what it is (not a closed oriented manifold, not outward,
+    /// self-intersecting).
+    Unsound(Vec<&'static str>),
+    /// Its constraints are above the targets: the largest angle (°) and mismatch (%).
+    ConstraintsNotMet(f64, f64),
+}
+
+impl TemplateFigures {
+    /// `Ok` for a template that can be used: a sound boundary and constraints within
+    /// [`MAX_ANGLE_DEG`] and [`MAX_MISMATCH_PCT`]. A Dice below [`TARGET_DICE`] is not a
+    /// verdict: the template is sound, the figures say how well it matches.
+    pub fn verdict(&self) -> std::result::Result<(), Verdict> {
+        let defects = [
+            (self.closed_manifold, "not a closed oriented manifold"),
+            (self.outward, "not outward"),
+            (self.self_intersection_free, "self-intersecting"),
+        ];
+        let causes: Vec<&'static str> = (defects.iter())
+            .filter(|(holds, _)| !holds)
+            .map(|&(_, what)| what)
+            .collect();
+        if !causes.is_empty() {
+            return Err(Verdict::Unsound(causes));
+        }
+        let (angle, mismatch) = (self.max_spoke_normal_deg, self.max_spoke_mismatch_pct);
+        if !(angle <= MAX_ANGLE_DEG && mismatch <= MAX_MISMATCH_PCT) {
+            return Err(Verdict::ConstraintsNotMet(angle, mismatch));
+        }
+        Ok(())
+    }
+}
+
+/// Builds the template of `shape` (see the module doc) within `memory`.
+pub fn template_of_shape(
+    shape: &Shape,
+    options: &TemplateOptions,
+    memory: MemoryLimit,
+) -> Result<BuiltTemplate> {
+    shape.bounds()?;
+    let (mask, voxel, wanted) = fine_mask(shape, options.voxel, memory)?;
+    let found = sheet_of_mask(&mask, options.sampling)?;
+    let initial = inflated(&found.sheet)?;
+    let dice_before_fit = voxel_dice(&initial.boundary_mesh()?, &mask)?;
+    let (fitted, fit_stopped_early) = if options.fit {
+        fit_to_shape(&initial, &mask, memory)?
+    } else {
+        (initial, None)
+    };
+    let projection = project(&fitted, &ProjectOptions::default())?;
+    let template = projection.template;
+    let figures = figures_of(
+        &template,
+        &found,
+        shape,
+        &mask,
+        [voxel, dice_before_fit, projection.max_displacement],
+    )?;
+    let figures = TemplateFigures {
+        voxel_wanted_mm: wanted,
+        ..figures
+    };
+    Ok(BuiltTemplate {
+        template,
+        found,
+        mask,
+        figures,
+        fit_stopped_early,
+    })
+}
+
+/// The shape on its fine grid and that grid's voxel (mm): `voxel`, or a third of the
+/// [`THIN_PERCENTILE`] of the half thicknesses found on a coarse grid, at most the coarse
+/// voxel, and coarsened as little as needed to stay within [`MAX_VOXELS`] and `memory`
+/// ([`voxel_within`]).
+fn fine_mask(
+    shape: &Shape,
+    voxel: Option<f64>,
+    memory: MemoryLimit,
+) -> Result<(Volume, f64, Option<f64>)> {
+    let (voxel, wanted) = match voxel {
+        Some(h) if h.is_finite() && h > 0.0 => (h, None),
+        Some(h) => {
+            return Err(Error::InvalidParameter(format!(
+                "the voxel must be a positive number of mm, got {h}"
+            )))
+        }
+        None => {
+            let h0 = shape.coarse_voxel()?;
+            let coarse = shape.on_grid(h0, memory)?;
+            let points = medial_points(&coarse, MIN_FEATURE_ANGLE_DEG)?;
+            let mut radii: Vec<f64> = points.iter().map(|p| p.radius).collect();
+            if radii.is_empty() {
+                return Err(Error::InvalidParameter(
+                    "the shape has no medial point on its coarse grid".into(),
+                ));
+            }
+            radii.sort_by(f64::total_cmp);
+            let thin = radii[(THIN_PERCENTILE * (radii.len() - 1) as f64) as usize];
+            let wanted = (thin / VOXELS_PER_RADIUS).min(h0);
+            let voxel = voxel_within(shape, wanted, memory)?;
+            (voxel, (voxel > wanted).then_some(wanted))
+        }
+    };
+    Ok((shape.on_grid(voxel, memory)?, voxel, wanted))
+}
+
+/// The finest voxel at least `h` (mm) whose grid around `shape` holds at most [`MAX_VOXELS`]
+/// and fits `memory` ([`Estimate::grid`], with room for the sheet's distance transforms: a
+/// tenth of the limit): the voxel grows by the cube root of the excess, a percent more, until
+/// the grid fits. A clinical segmentation at its thinnest wall's resolution asks for more
+/// voxels than a machine holds; a coarser grid loses the thinnest walls' detail, not the shape.
+fn voxel_within(shape: &Shape, h: f64, memory: MemoryLimit) -> Result<f64> {
+    let bytes_per_voxel = Estimate::grid([1, 1, 1]).total();
+    let cap = (MAX_VOXELS as f64).min(0.1 * memory.get() / bytes_per_voxel);
+    let bounds = shape.bounds()?;
+    let mut h = h;
+    for _ in 0..64 {
+        let dims = (bounds.extent() / h).map(|e| e.ceil() + 2.0 * MARGIN_VOXELS + 1.0);
+        let voxels = dims.x * dims.y * dims.z;
+        if voxels <= cap {
+            return Ok(h);
+        }
+        h *= 1.01 * (voxels / cap).cbrt();
+    }
+    Err(Error::InvalidParameter(format!(
+        "no grid of the shape fits {cap:.0} voxels"
+    )))
+}
+
+/// The sheet Loop-subdivided once, inflated and projected onto its constraints.
+fn inflated(sheet: &MedialSheet) -> Result<MedialTemplate> {
+    let inflated = inflate(&sheet.loop_subdivide()?)?;
+    let template = MedialTemplate::new(
+        inflated.boundary,
+        inflated.medial_index,
+        inflated.medial_points,
+    )?;
+    Ok(project(&template, &ProjectOptions::default())?.template)
+}
+
+/// The automatic fit of `template` to `mask` (as `medial fit --template --image` runs it); the
+/// fitted template, and why it stopped early when it ended where the model would fold (its last
+/// sound iterate is kept). Constraints left above their tolerance are enforced by the final
+/// projection.
+fn fit_to_shape(
+    template: &MedialTemplate,
+    mask: &Volume,
+    memory: MemoryLimit,
+) -> Result<(MedialTemplate, Option<String>)> {
+    let target = Target::Image {
+        volume: mask.clone(),
+        label: None,
+    };
+    let start = automatic(&Model::Medial(Box::new(template.clone())), &target)?;
+    let fit = start.fit(target, memory)?;
+    let outcomes = fit.run(|_| {})?;
+    let last = outcomes.last().expect("a fit has a stage");
+    let trajectory = fit.flow().shoot(fit.model().landmarks(), &last.momenta)?;
+    let started = fit.model().medial().expect("a medial template");
+    let fitted = started.with_landmarks(trajectory.final_positions())?;
+    let stopped = last.unsound.as_ref().map(|u| {
+        format!(
+            "AL iteration {}, iteration {}: {}",
+            u.al_iteration + 1,
+            u.iteration,
+            u.cause
+        )
+    });
+    Ok((fitted, stopped))
+}
+
+/// The figures of the final template (`[voxel of its grid, Dice before the fit, last
+/// projection move]`).
+fn figures_of(
+    template: &MedialTemplate,
+    found: &ShapeSheet,
+    shape: &Shape,
+    mask: &Volume,
+    [voxel, dice_before_fit, moved]: [f64; 3],
+) -> Result<TemplateFigures> {
+    let boundary = template.boundary_mesh()?;
+    let dice = voxel_dice(&boundary, mask)?;
+    let dice_input_grid = match shape {
+        Shape::Mask(input, _) => Some(voxel_dice(&boundary, input)?),
+        Shape::Mesh(_) => None,
+    };
+    let metrics = SpokeMetrics::compute(template, template.landmarks());
+    let summary = TemplateSummary::of(template);
+    let closed_manifold = check_closed_oriented_manifold(&boundary).is_ok();
+    let outward = check_outward(&boundary).is_ok();
+    let self_intersection_free = self_intersections(&boundary).is_empty();
+    let fold = |f: fn(f64, f64) -> f64, init| metrics.thickness.iter().copied().fold(init, f);
+    let meets_targets = dice >= TARGET_DICE
+        && summary.max_spoke_normal_deg <= MAX_ANGLE_DEG
+        && summary.max_spoke_mismatch_pct <= MAX_MISMATCH_PCT
+        && closed_manifold
+        && outward
+        && self_intersection_free;
+    Ok(TemplateFigures {
+        voxel_mm: voxel,
+        voxel_wanted_mm: None,
+        grid_dims: mask.dims(),
+        medial_points: found.medial_points.len(),
+        chart: found.lattices.iter().map(|l| l.chart.kind).collect(),
+        rings: found.lattices.iter().map(|l| l.rings).collect(),
+        stretch: found.lattices.iter().map(|l| l.stretch).collect(),
+        sheets: found.branching.sheets,
+        seams: found.branching.seams,
+        dice,
+        dice_input_grid,
+        meets_targets,
+        max_spoke_normal_deg: summary.max_spoke_normal_deg,
+        max_spoke_mismatch_pct: summary.max_spoke_mismatch_pct,
+        atoms: summary.atoms,
+        atoms_by_spokes: summary.atoms_by_spokes,
+        thickness_mm: [fold(f64::min, f64::INFINITY), fold(f64::max, 0.0)],
+        closed_manifold,
+        outward,
+        self_intersection_free,
+        dice_before_fit,
+        final_projection_move_mm: moved,
+        summary,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn figures(sound: [bool; 3], angle: f64, mismatch: f64) -> TemplateFigures {
+        TemplateFigures {
+            voxel_mm: 1.0,
+            voxel_wanted_mm: None,
+            grid_dims: [1, 1, 1],
+            medial_points: 0,
+            chart: vec![],
+            rings: vec![],
+            stretch: vec![],
+            sheets: 1,
+            seams: 0,
+            dice: 0.9,
+            dice_input_grid: None,
+            meets_targets: false,
+            max_spoke_normal_deg: angle,
+            max_spoke_mismatch_pct: mismatch,
+            atoms: 0,
+            atoms_by_spokes: [0; MAX_SPOKES],
+            thickness_mm: [0.0, 0.0],
+            closed_manifold: sound[0],
+            outward: sound[1],
+            self_intersection_free: sound[2],
+            dice_before_fit: 0.0,
+            final_projection_move_mm: 0.0,
+            summary: TemplateSummary::default(),
+        }
+    }
+
+    #[test]
+    fn a_broken_or_unprojected_template_is_not_a_success() {
+        assert!(
+            figures([true; 3], 0.05, 0.05).verdict().is_ok(),
+            "a low Dice is not a verdict"
+        );
+        assert_eq!(
+            figures([true, false, false], 0.0, 0.0).verdict(),
+            Err(Verdict::Unsound(vec!["not outward", "self-intersecting"]))
+        );
+        for (a, m) in [(0.2, 0.0), (0.0, 0.2), (f64::NAN, 0.0)] {
+            assert!(matches!(
+                figures([true; 3], a, m).verdict(),
+                Err(Verdict::ConstraintsNotMet(..))
+            ));
+        }
+    }
+}
