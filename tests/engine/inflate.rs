@@ -5,7 +5,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::f64::consts::PI;
 use std::path::Path;
 
-use medial::build::inflate::{inflate, Inflated, MedialSheet};
+use medial::build::inflate::{inflate, self_intersections, Inflated, MedialSheet, RadiusLimit};
 use medial::mesh::topology::{signed_volume, MeshDefect};
 use medial::synth::parameter_grid;
 use medial::{Error, Vec3};
@@ -335,16 +335,48 @@ fn subdivided_y_inflates_and_keeps_its_seam() {
         7,
         "a seam of 9 points has 7 three-spoke atoms"
     );
+    assert_eq!(inflated.limit, RadiusLimit::default(), "nothing to limit");
+    // A radius of 0.5 folds the offsets of the sheets across the seam (0.5 > 0.49): it is
+    // lowered there, to at most 0.6 · 0.28 · tan 60° = 0.29 next to the seam, and the rest of
+    // the sheets keep theirs.
     let thick = MedialSheet::new(
         sheet.points().to_vec(),
         sheet.triangles().to_vec(),
         vec![0.5; sheet.points().len()],
+    )
+    .unwrap();
+    let inflated = inflate(&thick).expect("the thick Y inflates once limited");
+    assert_valid(&inflated);
+    assert!(self_intersections(&inflated.boundary).is_empty());
+    let limit = &inflated.limit;
+    println!(
+        "thick Y: {} of {} vertices lowered ({} bound), by up to {:.1} % (mean {:.1} %), {} \
+         shrink rounds",
+        limit.vertices.len(),
+        thick.points().len(),
+        limit.bound.len(),
+        limit.max_pct(),
+        limit.mean_pct(),
+        limit.shrink_rounds
     );
-    let m = message(inflate(&thick.unwrap()).unwrap_err());
+    assert!(!limit.bound.is_empty() && limit.vertices.len() < thick.points().len());
+    for &m in &limit.bound {
+        let from_seam = thick.points()[m].xy().norm();
+        assert!(
+            from_seam < 1.0,
+            "vertex {m} bound {from_seam} from the seam"
+        );
+    }
     assert!(
-        m.contains("radius too large") && m.contains("medial vertices 9, 17, 29"),
-        "{m}"
+        limit.max_pct() > 40.0 && limit.max_pct() < 100.0,
+        "{limit:?}"
     );
+    for (&m, &pct) in limit.vertices.iter().zip(&limit.reduction_pct) {
+        assert!(
+            (inflated.radius[m] - 0.5 * (1.0 - pct / 100.0)).abs() < 1e-12,
+            "vertex {m}"
+        );
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -377,6 +409,11 @@ fn placenta_matches_cmrep_structure() {
     assert_eq!((fine.points().len(), fine.triangles().len()), (433, 816));
     let inflated = inflate(&fine).expect("placenta inflates");
     assert_valid(&inflated);
+    assert_eq!(
+        inflated.limit,
+        RadiusLimit::default(),
+        "a sheet that inflates as given keeps its radius"
+    );
     let ours = spoke_histogram(&spoke_counts(&inflated.medial_index, fine.points().len()));
 
     let cmrep = read_vtk("placenta_template_anterioralign3_bcmrep.vtk");
@@ -646,7 +683,7 @@ fn an_edge_in_four_triangles_is_refused() {
 }
 
 #[test]
-fn a_radius_too_large_for_the_curvature_is_refused() {
+fn a_radius_too_large_for_the_curvature_is_limited() {
     // A cylindrical arc of radius 1 spanning 240°: the inside offset folds when r > 1.
     let arc = |r: f64| {
         grid_sheet(
@@ -659,14 +696,55 @@ fn a_radius_too_large_for_the_curvature_is_refused() {
             |_| r,
         )
     };
-    let ok = inflate(&arc(0.3)).expect("thin arc inflates");
-    assert_valid(&ok);
-    let m = message(inflate(&arc(1.5)).unwrap_err());
+    let thin = inflate(&arc(0.3)).expect("thin arc inflates");
+    assert_valid(&thin);
+    assert_eq!(thin.limit, RadiusLimit::default());
+    // r = 1.5, r·κ = 1.5: limited to at most 0.6 / κ = 0.6 wherever the sheet is bound (the
+    // focal bound of a chord of the unit circle is 1), smoothly, and reported.
+    let sheet = arc(1.5);
+    let inflated = inflate(&sheet).expect("a thick arc inflates once limited");
+    assert_valid(&inflated);
+    assert!(self_intersections(&inflated.boundary).is_empty());
     assert!(
-        m.contains("radius too large for the curvature near medial vertices"),
-        "{m}"
+        inflated.volume() > 0.0 && inflated.volume() < thin.volume() * 5.0,
+        "{}",
+        inflated.volume()
     );
-    println!("{m}");
+    let limit = &inflated.limit;
+    println!(
+        "thick arc: {} of {} vertices lowered ({} bound), by up to {:.1} % (mean {:.1} %), {} \
+         shrink rounds",
+        limit.vertices.len(),
+        sheet.points().len(),
+        limit.bound.len(),
+        limit.max_pct(),
+        limit.mean_pct(),
+        limit.shrink_rounds
+    );
+    assert_eq!(
+        limit.vertices.len(),
+        sheet.points().len(),
+        "every vertex is lowered"
+    );
+    // Away from the two straight free edges (columns 0 and 16 of the grid, whose in-plane
+    // spokes see the far end of the arc instead), the bound is the focal distance 1.
+    for &m in &limit.bound {
+        let r = inflated.radius[m];
+        let interior = m % 17 != 0 && m % 17 != 16;
+        assert!(
+            r <= if interior { 0.6 + 1e-9 } else { 0.61 },
+            "vertex {m}: {r}"
+        );
+    }
+    assert!(
+        limit.max_pct() >= 60.0 - 1e-9 && limit.mean_pct() > 50.0,
+        "{limit:?}"
+    );
+    // The spokes are as long as the lowered radii.
+    for (b, spoke) in spokes(&inflated).iter().enumerate() {
+        let r = inflated.radius[inflated.medial_index[b]];
+        assert!((spoke.norm() - r).abs() < 1e-9 * r, "boundary point {b}");
+    }
 }
 
 #[test]
@@ -717,6 +795,7 @@ fn inflated_templates_are_accepted_by_medial_template() {
             boundary,
             medial_index,
             medial_points,
+            ..
         } = inflate(&sheet).unwrap();
         let nb = boundary.points().len();
         let template =

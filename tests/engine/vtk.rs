@@ -813,3 +813,155 @@ fn invalid_data_is_not_written() {
     );
     assert!(!path.exists());
 }
+
+// ---------------------------------------------------------------------------------------------
+// Tolerance as VTK's legacy reader (vtkDataReader / vtkPolyDataReader): what it accepts is read,
+// what it refuses is refused.
+
+/// Two triangles and three lines: 5 cells of two kinds, 4 points.
+const MIXED: &str = "# vtk DataFile Version 3.0
+mixed cells
+ASCII
+DATASET POLYDATA
+POINTS 4 float
+0 0 0
+1 0 0
+0 1 0
+1 1 0
+LINES 3 9
+2 0 1
+2 1 3
+2 3 2
+POLYGONS 2 8
+3 0 1 2
+3 1 3 2
+";
+
+#[test]
+fn lowercase_keywords_as_cmrep_writes_them() {
+    let text = "# vtk DataFile Version 3.0
+cmrep
+ascii
+dataset polydata
+points 4 float
+0 0 0 1 0 0 0 1 0 1 1 0
+lines 3 9
+2 0 1 2 1 3 2 3 2
+polygons 2 8
+3 0 1 2 3 1 3 2
+point_data 4
+scalars Radius double 1
+lookup_table default
+1 2 3 4
+field FieldData 1
+Rho 1 4 float
+0.5 0.5 0.5 0.5
+cell_data 5
+scalars Label int
+lookup_table default
+1 1 2 2 2
+lookup_table mine 1
+0 0 0 1
+";
+    let data = parse_str(text).expect("lowercase keywords");
+    assert_eq!((data.points.len(), data.cell_count()), (4, 5));
+    assert_eq!(
+        array(&data.point_data, "Radius").values,
+        [1.0, 2.0, 3.0, 4.0]
+    );
+    assert_eq!(array(&data.point_data, "Rho").values, [0.5; 4]);
+    assert_eq!(
+        array(&data.cell_data, "Label").values,
+        [1.0, 1.0, 2.0, 2.0, 2.0]
+    );
+}
+
+#[test]
+fn cell_data_counts_every_cell_kind() {
+    let data = parse_str(&format!(
+        "{MIXED}CELL_DATA 5\nSCALARS k float\nLOOKUP_TABLE default\n0 1 2 3 4\n"
+    ))
+    .expect("lines and polygons");
+    assert_eq!(array(&data.cell_data, "k").values.len(), 5);
+    // Counting the polygons alone is what VTK refuses as the first data section.
+    let message = format_message(parse_str(&format!("{MIXED}CELL_DATA 2\n")));
+    assert!(
+        message.contains(
+            "CELL_DATA declares 2 tuples but the file has 5 cells (vertices, lines, polygons \
+             and strips)"
+        ),
+        "{message}"
+    );
+}
+
+#[test]
+fn empty_data_sections() {
+    // Empty sections of the right size, and a later empty section of any size: VTK checks only
+    // the first data section against the geometry, and an empty one holds nothing to misfit.
+    for tail in [
+        "POINT_DATA 4\n",
+        "CELL_DATA 5\n",
+        "POINT_DATA 4\nCELL_DATA 5\n",
+        "point_data 4\nscalars r float\nlookup_table default\n1 1 1 1\ncell_data 2\n",
+        "CELL_DATA 5\nPOINT_DATA 9\n",
+        "POINT_DATA 4\nCELL_DATA 7\nFIELD FieldData 0\n",
+    ] {
+        let data = parse_str(&format!("{MIXED}{tail}")).unwrap_or_else(|e| panic!("{tail}: {e}"));
+        assert!(data.cell_data.is_empty(), "{tail}");
+    }
+}
+
+#[test]
+fn what_vtk_refuses_is_refused() {
+    let refused = [
+        // The first data section must count the geometry before it.
+        (
+            "POINT_DATA 3\n",
+            "POINT_DATA declares 3 tuples but the file has 4 points",
+        ),
+        // Geometry after the data: VTK reads only attributes there.
+        (
+            "POINT_DATA 4\nPOLYGONS 1 4\n3 0 1 3\n",
+            "POLYGONS after POINT_DATA: the geometry must come before",
+        ),
+        (
+            "CELL_DATA 5\nPOINTS 1 float\n0 0 0\n",
+            "POINTS after CELL_DATA",
+        ),
+        // A later section of the wrong size may be empty, not hold arrays (VTK would read
+        // them into an inconsistent data set).
+        (
+            "POINT_DATA 4\nCELL_DATA 2\nSCALARS s float\nLOOKUP_TABLE default\n1 2\n",
+            "SCALARS in CELL_DATA 2, but the file has 5 cells",
+        ),
+        (
+            "POINT_DATA 4\nCELL_DATA 2\nFIELD f 1\nx 1 2 float\n1 2\n",
+            "a FIELD array in CELL_DATA 2, but the file has 5 cells",
+        ),
+        // Keywords VTK does not know, in any case.
+        ("point_data 4\nsplines 1\n", "unknown keyword 'splines'"),
+    ];
+    for (tail, want) in refused {
+        let message = format_message(parse_str(&format!("{MIXED}{tail}")));
+        assert!(message.contains(want), "{tail}: {message}");
+    }
+}
+
+#[test]
+fn real_cmrep_sheets_read() {
+    for (name, points, triangles) in [
+        ("cmrep/real/caudate_pde_model.vtk", 310, 558),
+        ("cmrep/real/t002_hipp-prob_template.vtk", 853, 1584),
+    ] {
+        let data = read_polydata(&data_file(name)).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(data.points.len(), points, "{name}");
+        assert_eq!(
+            data.triangles().expect("triangles").len(),
+            triangles,
+            "{name}"
+        );
+        let radius = data.point_array_ci("radius").expect("Radius");
+        assert_eq!(radius.values.len(), points, "{name}");
+        assert!(radius.values.iter().all(|&r| r > 0.0), "{name}");
+    }
+}

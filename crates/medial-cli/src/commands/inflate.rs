@@ -1,9 +1,10 @@
 //! `medial inflate`: a cmrep medial template from a medial sheet mesh with a radius per vertex
-//! (SPEC §9), optionally Loop-subdivided first. Prints a JSON summary of the template.
+//! (SPEC §9), optionally Loop-subdivided first. Prints a JSON summary of the template and of
+//! where inflation lowered a radius too large for the sheet (`radius_limit`).
 
 use crate::error::CliError;
 use crate::output::{model_error, print_json, write_options, TemplateSummary};
-use medial_core::build::inflate::inflate;
+use medial_core::build::inflate::{inflate, RadiusLimit};
 use medial_core::model::template::MedialTemplate;
 use medial_io::sheet::read_sheet;
 use serde::Serialize;
@@ -52,6 +53,7 @@ pub fn run(args: &InflateArgs) -> Result<(), CliError> {
             .map_err(|e| model_error(&args.sheet, e))?;
     }
     let inflated = inflate(&sheet).map_err(|e| model_error(&args.sheet, e))?;
+    let radius_limit = LimitSummary::of(&inflated.limit);
     let template = MedialTemplate::new(
         inflated.boundary,
         inflated.medial_index,
@@ -63,6 +65,7 @@ pub fn run(args: &InflateArgs) -> Result<(), CliError> {
         sheet_points: coarse.points().len(),
         sheet_triangles: coarse.triangles().len(),
         subdivisions: args.subdivide,
+        radius_limit,
         template: TemplateSummary::of(&template),
     };
     print_json(&summary)
@@ -74,5 +77,39 @@ struct InflateSummary {
     sheet_points: usize,
     sheet_triangles: usize,
     subdivisions: usize,
+    radius_limit: LimitSummary,
     template: TemplateSummary,
+}
+
+/// Where inflation lowered the (subdivided) sheet's radius, because it was too large for the
+/// curvature of the sheet or for the angle between the sheets at a seam.
+#[derive(Serialize)]
+struct LimitSummary {
+    /// How many medial vertices (of the subdivided sheet, the template's atoms) were lowered.
+    vertices_lowered: usize,
+    /// How many of them the focal bound (or a shrink after a self-intersection) bound; the others were
+    /// lowered by the taper that keeps the radius smooth around them.
+    vertices_bound: usize,
+    /// The largest and the mean lowering over the lowered vertices, % of the sheet's radius.
+    max_reduction_pct: f64,
+    mean_reduction_pct: f64,
+    /// Shrink rounds after a self-intersection (the focal bound itself takes one pass).
+    shrink_rounds: usize,
+    /// The lowered medial vertices (atoms), ascending, and the lowering of each (%).
+    vertices: Vec<usize>,
+    reduction_pct: Vec<f64>,
+}
+
+impl LimitSummary {
+    fn of(limit: &RadiusLimit) -> Self {
+        Self {
+            vertices_lowered: limit.vertices.len(),
+            vertices_bound: limit.bound.len(),
+            max_reduction_pct: limit.max_pct(),
+            mean_reduction_pct: limit.mean_pct(),
+            shrink_rounds: limit.shrink_rounds,
+            vertices: limit.vertices.clone(),
+            reduction_pct: limit.reduction_pct.clone(),
+        }
+    }
 }

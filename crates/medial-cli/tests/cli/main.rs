@@ -11,6 +11,7 @@ mod batch;
 mod check;
 mod fit;
 mod guards;
+mod inflate;
 mod resume;
 mod template;
 mod templates;

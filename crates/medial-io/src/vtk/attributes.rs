@@ -68,30 +68,55 @@ impl ArrayHeader {
 
 impl Parser<'_> {
     /// `POINT_DATA n` or `CELL_DATA n`: where the following arrays go.
+    ///
+    /// As in VTK's legacy reader (`vtkPolyDataReader`), the first of them ends the geometry
+    /// and must count every point, or every cell of all kinds (vertices, lines, polygons and
+    /// strips); a later one is not checked against the geometry, so an empty section may
+    /// declare any count, but the arrays it holds must fit the data set (see
+    /// [`Self::target`]).
     pub(super) fn attribute_set(&mut self, set: AttributeSet) -> Result<()> {
         self.cursor.section = set.name().into();
         let n = self.cursor.count("the number of tuples")?;
-        let declared = match set {
-            AttributeSet::Point => &mut self.point_tuples,
-            AttributeSet::Cell => &mut self.cell_tuples,
-        };
-        if let Some(old) = declared.replace(n).filter(|&old| old != n) {
-            return Err(self.cursor.error(format!(
-                "{} {n} contradicts the earlier {} {old}",
-                set.name(),
-                set.name()
-            )));
+        if self.target.is_none() {
+            let (have, what) = self.tuples_in_geometry(set);
+            if n != have {
+                return Err(self.cursor.error(format!(
+                    "{} declares {n} tuples but the file has {have} {what}",
+                    set.name()
+                )));
+            }
         }
         self.target = Some((set, n));
         Ok(())
     }
 
-    /// The current attribute set and its number of tuples.
+    /// The number of points, or of cells of all kinds, and what they are called.
+    fn tuples_in_geometry(&self, set: AttributeSet) -> (usize, &'static str) {
+        match set {
+            AttributeSet::Point => (self.data.points.len(), "points"),
+            AttributeSet::Cell => (
+                self.data.cell_count(),
+                "cells (vertices, lines, polygons and strips)",
+            ),
+        }
+    }
+
+    /// The current attribute set and its number of tuples, which must fit the data set for
+    /// an array to go there: VTK would read the array but give an inconsistent data set.
     fn target(&self, keyword: &str) -> Result<(AttributeSet, usize)> {
-        self.target.ok_or_else(|| {
+        let (set, n) = self.target.ok_or_else(|| {
             self.cursor
                 .error(format!("{keyword} before POINT_DATA or CELL_DATA"))
-        })
+        })?;
+        let (have, what) = self.tuples_in_geometry(set);
+        if n != have {
+            return Err(self.cursor.error(format!(
+                "{keyword} in {} {n}, but the file has {have} {what}: an array needs one tuple \
+                 each",
+                set.name()
+            )));
+        }
+        Ok((set, n))
     }
 
     fn arrays_mut(&mut self, set: AttributeSet) -> &mut Vec<DataArray> {
@@ -114,6 +139,9 @@ impl Parser<'_> {
             let token = self.cursor.expect("a field array name")?;
             if token == b"NULL_ARRAY" {
                 continue;
+            }
+            if target.is_some() {
+                self.target("a FIELD array")?;
             }
             let name = decode_name(token);
             self.cursor.section = format!("{prefix} FIELD {field_name} array '{name}'");

@@ -167,12 +167,9 @@ pub(super) struct Parser<'a> {
     offsets_layout: bool,
     /// What has been read so far.
     pub(super) data: PolyData,
-    /// The attribute set that arrays go to, with its number of tuples.
+    /// The attribute set that arrays go to, with its declared number of tuples. Set by the
+    /// first `POINT_DATA` or `CELL_DATA`, after which no geometry may follow (as in VTK).
     pub(super) target: Option<(AttributeSet, usize)>,
-    /// The number of tuples declared by `POINT_DATA`, if any.
-    pub(super) point_tuples: Option<usize>,
-    /// The number of tuples declared by `CELL_DATA`, if any.
-    pub(super) cell_tuples: Option<usize>,
     /// Whether a `POINTS` section was read.
     seen_points: bool,
 }
@@ -184,8 +181,6 @@ impl<'a> Parser<'a> {
             offsets_layout,
             data: PolyData::default(),
             target: None,
-            point_tuples: None,
-            cell_tuples: None,
             seen_points: false,
         }
     }
@@ -216,30 +211,23 @@ impl<'a> Parser<'a> {
         Ok(())
     }
 
-    /// Checks the declared attribute counts and the whole data set.
+    /// Checks the whole data set.
     fn finish(self) -> Result<PolyData> {
-        let Parser {
-            cursor,
-            data,
-            point_tuples,
-            cell_tuples,
-            ..
-        } = self;
-        let error = |m: String| Error::format(cursor.path, m);
-        if let Some(n) = point_tuples.filter(|&n| n != data.points.len()) {
-            return Err(error(format!(
-                "POINT_DATA declares {n} tuples but the file has {} points",
-                data.points.len()
-            )));
-        }
-        if let Some(n) = cell_tuples.filter(|&n| n != data.cell_count()) {
-            return Err(error(format!(
-                "CELL_DATA declares {n} tuples but the file has {} cells",
-                data.cell_count()
-            )));
-        }
-        data.validate().map_err(error)?;
+        let Parser { cursor, data, .. } = self;
+        data.validate().map_err(|m| Error::format(cursor.path, m))?;
         Ok(data)
+    }
+
+    /// Geometry ends at the first `POINT_DATA` or `CELL_DATA`: VTK's reader reads only
+    /// attributes after it and refuses a geometry keyword there.
+    fn check_geometry_allowed(&self, keyword: &str) -> Result<()> {
+        match self.target {
+            Some((set, _)) => Err(self.cursor.error(format!(
+                "{keyword} after {}: the geometry must come before the point and cell data",
+                set.name()
+            ))),
+            None => Ok(()),
+        }
     }
 
     /// `a × b`, or an error when the declared size overflows.
@@ -250,6 +238,7 @@ impl<'a> Parser<'a> {
 
     fn points(&mut self) -> Result<()> {
         self.cursor.section = "POINTS".into();
+        self.check_geometry_allowed("POINTS")?;
         if self.seen_points {
             return Err(self.cursor.error("a second POINTS section"));
         }
@@ -266,6 +255,7 @@ impl<'a> Parser<'a> {
 
     fn cells(&mut self, section: CellSection) -> Result<()> {
         self.cursor.section = section.name().into();
+        self.check_geometry_allowed(section.name())?;
         let first = self.cursor.count("the number of cells")?;
         let size = self.cursor.count("the size of the cell list")?;
         let cells = if self.offsets_layout {

@@ -3,7 +3,6 @@
 //! the problem.
 
 use super::geometry::{corners, is_degenerate};
-use super::intersect::self_intersections;
 use super::regions::UnionFind;
 use super::LIST_MAX;
 use crate::mesh::topology::{check_closed_oriented_manifold, MeshDefect};
@@ -21,11 +20,12 @@ pub(super) fn atoms_of(points: impl IntoIterator<Item = usize>, medial_index: &[
     list.join(", ")
 }
 
-pub(super) fn check_boundary(mesh: &TriMesh, medial_index: &[usize]) -> Result<()> {
+/// The checks before the self-intersection test: no degenerate triangle, closed, manifold,
+/// outward.
+pub(super) fn check_surface(mesh: &TriMesh, medial_index: &[usize]) -> Result<()> {
     check_boundary_degenerate(mesh, medial_index)?;
     check_closed_manifold(mesh, medial_index)?;
-    check_outward(mesh, medial_index)?;
-    check_self_intersections(mesh, medial_index)
+    check_outward(mesh, medial_index)
 }
 
 pub(super) fn check_boundary_degenerate(mesh: &TriMesh, medial_index: &[usize]) -> Result<()> {
@@ -126,24 +126,28 @@ pub(super) fn check_outward(mesh: &TriMesh, medial_index: &[usize]) -> Result<()
     }
 }
 
-pub(super) fn check_self_intersections(mesh: &TriMesh, medial_index: &[usize]) -> Result<()> {
-    let pairs = self_intersections(mesh);
-    if pairs.is_empty() {
-        return Ok(());
-    }
+/// The error for a boundary whose triangle pairs `pairs` (non-empty) intersect, after the
+/// radius was lowered at `lowered` medial vertices by up to `max_pct` %.
+pub(super) fn intersection_error(
+    mesh: &TriMesh,
+    medial_index: &[usize],
+    pairs: &[(usize, usize)],
+    lowered: usize,
+    max_pct: f64,
+) -> Error {
     let tri = |f: usize| mesh.triangles()[f];
     let points = pairs
         .iter()
         .flat_map(|&(f, g)| tri(f).into_iter().chain(tri(g)));
-    Err(Error::InvalidTemplate(format!(
+    let (f, g) = pairs.first().copied().unwrap_or_default();
+    Error::InvalidTemplate(format!(
         "the inflated boundary intersects itself ({} pairs of triangles, e.g. boundary triangles \
-         {} and {}): radius too large for the curvature near medial vertices {} (or for the \
-         angle between the sheets there, at a seam); lower the radius or refine the sheet",
+         {f} and {g}) after lowering the radius at {lowered} medial vertices by up to \
+         {max_pct:.0} %: radius too large for the curvature near medial vertices {} (or for \
+         the angle between the sheets there, at a seam); lower the radius or refine the sheet",
         pairs.len(),
-        pairs[0].0,
-        pairs[0].1,
         atoms_of(points, medial_index)
-    )))
+    ))
 }
 
 #[cfg(test)]
@@ -167,8 +171,8 @@ mod tests {
     #[test]
     fn boundary_checks() {
         let index = [0, 1, 2, 3];
-        assert!(check_boundary(&tetrahedron(false), &index).is_ok());
-        let e = check_boundary(&tetrahedron(true), &index)
+        assert!(check_surface(&tetrahedron(false), &index).is_ok());
+        let e = check_surface(&tetrahedron(true), &index)
             .unwrap_err()
             .to_string();
         assert!(
@@ -177,7 +181,7 @@ mod tests {
         );
         let (p, mut t) = tetrahedron(false).into_parts();
         t.pop();
-        let e = check_boundary(&TriMesh::new(p.clone(), t).unwrap(), &index)
+        let e = check_surface(&TriMesh::new(p.clone(), t).unwrap(), &index)
             .unwrap_err()
             .to_string();
         assert!(e.contains("not a closed oriented surface"), "{e}");
@@ -190,7 +194,7 @@ mod tests {
         ]);
         let mut t2 = tetrahedron(false).into_parts().1;
         t2.extend([[0, 4, 5], [0, 6, 4], [4, 6, 5], [0, 5, 6]]);
-        let e = check_boundary(&TriMesh::new(p2, t2).unwrap(), &[0, 1, 2, 3, 4, 5, 6])
+        let e = check_surface(&TriMesh::new(p2, t2).unwrap(), &[0, 1, 2, 3, 4, 5, 6])
             .unwrap_err()
             .to_string();
         assert!(

@@ -19,7 +19,8 @@ pub(super) struct SheetGeometry {
 }
 
 impl SheetGeometry {
-    pub(super) fn new(sheet: &MedialSheet) -> Self {
+    /// The geometry of `sheet` with the radii `radius` (one per point) in place of its own.
+    pub(super) fn new(sheet: &MedialSheet, radius: &[f64]) -> Self {
         let n = sheet.points().len();
         let mut gradient = vec![Vec3::zeros(); n];
         let mut weight = vec![0.0; n];
@@ -27,7 +28,7 @@ impl SheetGeometry {
         let mut angle = Vec::with_capacity(sheet.triangles().len());
         for tri in sheet.triangles() {
             let p = corners(sheet.points(), tri);
-            let r = tri.map(|v| sheet.radius()[v]);
+            let r = tri.map(|v| radius[v]);
             let cross = (p[1] - p[0]).cross(&(p[2] - p[0]));
             let area = 0.5 * cross.norm();
             let g = triangle_gradient(&p, &r);

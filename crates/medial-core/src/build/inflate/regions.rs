@@ -128,6 +128,30 @@ impl Regions {
         }
     }
 
+    /// The direction of every boundary vertex as the radius limit sees it
+    /// ([`super::limit::focal_bounds`]): its spoke without the tilt by the radius gradient, i.e.
+    /// along its free edges if it has any, else the region's unit normal (the bisector at a
+    /// seam). It depends on the sheet's shape only, not on its radius.
+    pub(super) fn fold_directions(
+        &self,
+        sheet: &MedialSheet,
+        edges: &Edges,
+        geometry: &SheetGeometry,
+    ) -> Result<Vec<Vec3>> {
+        let normal = self.region_normals(geometry);
+        let free = self.free_edge_directions(sheet, edges);
+        (0..self.atom.len())
+            .map(|b| {
+                let m = self.atom[b];
+                if free[b] != Vec3::zeros() {
+                    unit(free[b], m)
+                } else {
+                    unit(normal[b], m)
+                }
+            })
+            .collect()
+    }
+
     /// The angle-weighted normal of every region: `Σ α_t(m) · (±n̂_t)` over the corners glued
     /// into it, with `+n̂_t` for side `+` and `−n̂_t` for side `−`.
     pub(super) fn region_normals(&self, geometry: &SheetGeometry) -> Vec<Vec3> {
