@@ -88,6 +88,24 @@ impl Contrast {
         Self::from_rows(name, &rows, design)
     }
 
+    /// A contrast from a file's text, as meshglm reads its contrast files: one row per line
+    /// (numbers or an expression; blank lines and lines starting with `#` skipped), named
+    /// `name`.
+    pub fn parse_file(name: &str, text: &str, design: &Design) -> Result<Self> {
+        let rows: Vec<&str> = text
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty() && !l.starts_with('#'))
+            .collect();
+        let parsed = rows
+            .iter()
+            .map(|row| {
+                parse_row(row, design).map_err(|problem| StatsError::contrast(name, problem))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Self::from_rows(name, &parsed, design)
+    }
+
     /// The contrast's name.
     pub fn name(&self) -> &str {
         &self.name
@@ -266,6 +284,15 @@ mod tests {
         let c = Contrast::parse("mix: -0.5*group[p] + 5e-1 age-2 dose + 0.25 * age", &d).unwrap();
         assert_eq!(c.name(), "mix");
         assert_eq!(row(&c, 0), [0.0, -0.5, 0.0, 0.75, -2.0]);
+    }
+
+    #[test]
+    fn files_have_a_row_per_line() {
+        let d = design();
+        let c = Contrast::parse_file("file", "# weights\n0 1 0 0 0\n\n group[q] \n", &d).unwrap();
+        assert_eq!((c.name(), c.rows()), ("file", 2));
+        assert_eq!(row(&c, 1), [0.0, 0.0, 1.0, 0.0, 0.0]);
+        assert!(Contrast::parse_file("file", "1 2\n", &d).is_err());
     }
 
     #[test]

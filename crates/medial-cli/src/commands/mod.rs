@@ -4,7 +4,8 @@
 //! turns a closed mesh into a mask; [`report`] writes the views of a fit folder again;
 //! [`check`] measures whether the medial points stay the centres of inscribed balls; [`apply`]
 //! carries other data by the map of a fit; [`batch`] fits a cohort of subjects and gathers it;
-//! [`template`] builds a template from a shape (a segmentation or a closed mesh).
+//! [`template`] builds a template from a shape (a segmentation or a closed mesh); [`stats`]
+//! tests a design's contrasts at every element of a mesh.
 
 mod apply;
 mod batch;
@@ -14,6 +15,7 @@ mod inflate;
 mod project;
 mod rasterize;
 mod report;
+mod stats;
 mod synth;
 mod template;
 
@@ -121,6 +123,12 @@ pub enum Command {
     /// fit (its flow after its initial alignment), or back with --inverse; optionally write the
     /// displacement field as a NIfTI warp for ITK, ANTs and greedy. Prints a JSON summary.
     Apply(apply::ApplyArgs),
+    /// A general linear model at every point (or cell, --cell) of a mesh whose array holds one
+    /// component per subject, as meshglm takes it: t or F and parametric p, with --permutations
+    /// the FWER-corrected p of the maximum statistic, of clusters (--threshold) and of TFCE
+    /// (--tfce). Writes DIR/stats.vtk (arrays beta, t, p, p_fwer, cluster, p_cluster, tfce,
+    /// p_tfce), DIR/clusters.csv and DIR/summary.json (printed too).
+    Stats(stats::StatsArgs),
 }
 
 /// Parses `--mu`: a positive, finite penalty weight.
@@ -207,6 +215,7 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
         Command::Check(args) => check::run(&args)?,
         Command::Batch(args) => batch::run(&args, threads, quiet)?,
         Command::Apply(args) => apply::run(&args)?,
+        Command::Stats(args) => stats::run(&args)?,
     }
     Ok(())
 }

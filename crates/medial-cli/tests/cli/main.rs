@@ -13,6 +13,7 @@ mod fit;
 mod guards;
 mod inflate;
 mod resume;
+mod stats;
 mod template;
 mod templates;
 mod transform;

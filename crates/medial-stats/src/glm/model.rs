@@ -3,13 +3,14 @@
 //!
 //! With X = U S Vᵀ (rank r, U the n × r basis of its columns), X⁺ = V S⁻¹ Uᵀ and A = X⁺ᵀ Cᵀ
 //! (n × q), the contrast's estimate is Cβ̂ = Aᵀy and its covariance factor
-//! C(XᵀX)⁻¹Cᵀ = AᵀA. With B an orthonormal basis of A's columns (B = a/|a| for one row), the
-//! statistic of any data vector y needs only g = [Bᵀ; Uᵀ] y (q + r numbers) and |y|²:
-//! the residual sum of squares is |y|² − |Uᵀy|², s² = rss/(n − r), and
-//! t = bᵀy / s, F = |Bᵀy|² / (q s²). The nuisance space is X's columns under the null
-//! hypothesis, span(X N) with N a basis of C's null space: data are permuted after its part is
-//! removed (Freedman–Lane), which leaves the statistic of the unpermuted data unchanged
-//! because Cβ̂ and the residuals ignore that part.
+//! C(XᵀX)⁻¹Cᵀ = AᵀA. With B an orthonormal basis of A's columns (B = a/|a| for one row),
+//! t = bᵀy / s and F = |Bᵀy|² / (q s²), s² = rss/(n − r). The nuisance space is X's columns
+//! under the null hypothesis, span(X N) with N a basis of C's null space, of dimension r − q;
+//! A's columns are orthogonal to it and complete it to X's columns. With W an orthonormal basis
+//! of it, the statistic of any data vector y needs only g = [Bᵀ; Wᵀ] y (r numbers) and |y|²:
+//! rss = |y|² − |g|². Data are permuted after their nuisance part is removed (Freedman–Lane),
+//! which leaves the statistic of the unpermuted data unchanged because Cβ̂ and the residuals
+//! ignore that part.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -38,7 +39,7 @@ fn column_basis(m: &DMatrix<f64>, scale: f64) -> DMatrix<f64> {
 /// A design and contrast ready for many data vectors.
 #[derive(Clone, Debug)]
 pub(crate) struct Model {
-    /// (q + r) × n: the rows of Bᵀ, then those of Uᵀ.
+    /// r × n: the rows of Bᵀ, then those of Wᵀ.
     pub(crate) g: DMatrix<f64>,
     /// Contrast rows.
     pub(crate) q: usize,
@@ -101,9 +102,16 @@ impl Model {
             .expect("a non-negative tolerance");
         let null_of_c = DMatrix::identity(p, p) - c_pinv * c;
         let nuisance = column_basis(&(x * null_of_c), s.max());
-        let mut g = DMatrix::zeros(q + rank, n);
+        if nuisance.ncols() + q != rank {
+            return Err(StatsError::contrast(
+                name,
+                "is numerically at the edge of estimability: its nuisance space does not \
+                 complete it to the design's columns",
+            ));
+        }
+        let mut g = DMatrix::zeros(rank, n);
         g.rows_mut(0, q).copy_from(&b.transpose());
-        g.rows_mut(q, rank).copy_from(&u.transpose());
+        g.rows_mut(q, rank - q).copy_from(&nuisance.transpose());
         Ok(Self {
             g,
             q,
@@ -113,7 +121,7 @@ impl Model {
         })
     }
 
-    /// Rows of g: q + rank.
+    /// Rows of g: the rank of X.
     pub(crate) fn width(&self) -> usize {
         self.g.nrows()
     }
@@ -126,10 +134,10 @@ impl Model {
         }
     }
 
-    /// The statistic (t for one contrast row, F for more) from g = [Bᵀ; Uᵀ] y and |y|²; NaN
+    /// The statistic (t for one contrast row, F for more) from g = [Bᵀ; Wᵀ] y and |y|²; NaN
     /// when the residual variance is zero.
     pub(crate) fn statistic(&self, g: &[f64], squared_norm: f64) -> f64 {
-        let projection: f64 = g[self.q..].iter().map(|v| v * v).sum();
+        let projection: f64 = g.iter().map(|v| v * v).sum();
         let variance = (squared_norm - projection) / self.df as f64;
         if variance.is_nan() || variance <= 0.0 {
             return f64::NAN;

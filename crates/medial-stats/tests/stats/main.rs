@@ -1,6 +1,7 @@
 //! The tests of medial-stats against independent computations: dense least squares, brute-force
 //! enumeration of permutations, and meshglm's test data.
 
+mod calibration;
 mod common;
 mod glm;
 mod meshglm;

@@ -1,0 +1,481 @@
+//! `medial stats`: a general linear model at every point or cell of a mesh whose array holds one
+//! component per subject (meshglm's input), with permutation inference; the statistics are
+//! [`medial_stats`]'s, this module reads the inputs, calls it and writes the results.
+
+use crate::error::CliError;
+use crate::output::{print_json, write_json, write_options, write_text};
+use medial_io::vtk::{self, ArrayKind, DataArray, PolyData, ValueType};
+use medial_stats::{
+    diffusion_time, Contrast, ContrastResult, Design, Elements, Mesh, Observations, Options, Study,
+    Support, TableOptions, Tail, TfceParameters,
+};
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+
+/// Test a design's contrasts at every element of a mesh.
+#[derive(clap::Args, Debug)]
+pub struct StatsArgs {
+    /// A legacy VTK triangle mesh with an array of one component per subject (--array).
+    #[arg(value_name = "INPUT.vtk")]
+    pub input: PathBuf,
+    /// The design: a CSV table with a header (.csv: columns by name, text columns categorical,
+    /// an intercept added), or meshglm's whitespace matrix taken as it is (any other name).
+    #[arg(long, value_name = "DESIGN")]
+    pub design: PathBuf,
+    /// A contrast, repeatable: `name: group[patient] - group[control]`, weights `-1 1 0.05`,
+    /// rows separated by `;` for an F-test, or a file with one row per line (meshglm's).
+    #[arg(long = "contrast", value_name = "C", required = true)]
+    pub contrasts: Vec<String>,
+    /// Output folder (created if needed).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// The array of the subjects' values.
+    #[arg(long, value_name = "NAME", default_value = "Y")]
+    pub array: String,
+    /// The array is on the triangles (CELL_DATA), not the points.
+    #[arg(long)]
+    pub cell: bool,
+    /// Random permutations (all distinct ones when they are fewer); 0: parametric p only.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub permutations: usize,
+    /// Seed of the permutations.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    pub seed: u64,
+    /// Cluster-forming threshold on t (|t| with --two-sided, F for an F-test).
+    #[arg(long, value_name = "T")]
+    pub threshold: Option<f64>,
+    /// Threshold-free cluster enhancement.
+    #[arg(long)]
+    pub tfce: bool,
+    /// TFCE's extent power E.
+    #[arg(long, value_name = "E", default_value_t = 0.5)]
+    pub tfce_e: f64,
+    /// TFCE's height power H.
+    #[arg(long, value_name = "H", default_value_t = 2.0)]
+    pub tfce_h: f64,
+    /// TFCE's height step.
+    #[arg(long, value_name = "DH", default_value_t = 0.1)]
+    pub tfce_dh: f64,
+    /// Test cᵀβ ≠ 0 rather than cᵀβ > 0.
+    #[arg(long)]
+    pub two_sided: bool,
+    /// Benjamini–Hochberg q-values of the parametric p (array `q`).
+    #[arg(long)]
+    pub fdr: bool,
+    /// Smooth every subject's map on the mesh first (heat diffusion), FWHM in mm.
+    #[arg(long, value_name = "MM")]
+    pub fwhm: Option<f64>,
+    /// Fewest subjects with a value (not NaN) for an element to be tested.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub min_observations: usize,
+    /// An array on the same elements: elements where it is not 0 are left out.
+    #[arg(long, value_name = "NAME")]
+    pub exclude: Option<String>,
+    /// A file of one number per subject (whitespace-separated): subjects with 0 are left out.
+    #[arg(long, value_name = "FILE")]
+    pub row_mask: Option<PathBuf>,
+    /// CSV design: the columns to use, comma-separated [default: all but subject/id].
+    #[arg(long, value_name = "A,B", value_delimiter = ',')]
+    pub columns: Option<Vec<String>>,
+    /// CSV design: columns to take as categorical even if numeric, comma-separated.
+    #[arg(long, value_name = "A,B", value_delimiter = ',')]
+    pub categorical: Vec<String>,
+    /// CSV design: the reference level of a categorical column, `COLUMN=LEVEL`, repeatable.
+    #[arg(long = "reference", value_name = "COLUMN=LEVEL")]
+    pub references: Vec<String>,
+    /// CSV design: no intercept column.
+    #[arg(long)]
+    pub no_intercept: bool,
+}
+
+/// One line for a statistics error.
+fn stats_error(e: medial_stats::StatsError) -> CliError {
+    CliError::Input(format!("stats: {e}"))
+}
+
+fn read_text(path: &Path) -> Result<String, CliError> {
+    std::fs::read_to_string(path).map_err(|e| CliError::io(path, e))
+}
+
+/// The design, from a CSV table or meshglm's matrix.
+fn read_design(args: &StatsArgs) -> Result<Design, CliError> {
+    let text = read_text(&args.design)?;
+    let is_csv = args
+        .design
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    let design = if is_csv {
+        let references = args
+            .references
+            .iter()
+            .map(|r| match r.split_once('=') {
+                Some((c, l)) => Ok((c.trim().to_string(), l.trim().to_string())),
+                None => Err(CliError::Usage(format!(
+                    "--reference {r}: expected COLUMN=LEVEL"
+                ))),
+            })
+            .collect::<Result<_, _>>()?;
+        let options = TableOptions {
+            columns: args.columns.clone(),
+            categorical: args.categorical.clone(),
+            references,
+            intercept: !args.no_intercept,
+        };
+        Design::from_csv(&text, &options)
+    } else {
+        Design::from_whitespace(&text)
+    };
+    design.map_err(|e| CliError::Input(format!("{}: {e}", args.design.display())))
+}
+
+/// A contrast given as text or as a file.
+fn read_contrast(spec: &str, design: &Design) -> Result<Contrast, CliError> {
+    let path = Path::new(spec);
+    if path.is_file() {
+        let name = path
+            .file_stem()
+            .map_or(spec.into(), |s| s.to_string_lossy());
+        Contrast::parse_file(&name, &read_text(path)?, design)
+            .map_err(|e| CliError::Input(format!("{}: {e}", path.display())))
+    } else {
+        Contrast::parse(spec, design).map_err(stats_error)
+    }
+}
+
+/// What `medial stats` prints and writes as summary.json.
+#[derive(Serialize)]
+struct Summary {
+    input: PathBuf,
+    array: String,
+    support: &'static str,
+    subjects: usize,
+    elements: usize,
+    design_columns: Vec<String>,
+    fwhm_mm: Option<f64>,
+    diffusion_time_mm2: Option<f64>,
+    tfce: Option<TfceSettings>,
+    contrasts: Vec<ContrastSummary>,
+}
+
+#[derive(Serialize)]
+struct TfceSettings {
+    e: f64,
+    h: f64,
+    dh: f64,
+}
+
+#[derive(Serialize)]
+struct ContrastSummary {
+    name: String,
+    folder: PathBuf,
+    weights: Vec<Vec<f64>>,
+    statistic: &'static str,
+    two_sided: bool,
+    elements_tested: usize,
+    max_statistic: f64,
+    min_p: f64,
+    permutations: Option<usize>,
+    exact_permutations: Option<bool>,
+    seed: Option<u64>,
+    min_p_fwer: Option<f64>,
+    fwer_significant_elements: Option<usize>,
+    cluster_threshold: Option<f64>,
+    clusters: Option<usize>,
+    significant_clusters: Option<usize>,
+    min_p_tfce: Option<f64>,
+    /// The 95th percentile of each null distribution (the FWER 5 % critical values).
+    critical_statistic: Option<f64>,
+    critical_cluster_area_mm2: Option<f64>,
+    critical_tfce: Option<f64>,
+}
+
+/// The 95th percentile (the value reached by 5 % of the permutations).
+fn critical(null: &[f64]) -> Option<f64> {
+    if null.is_empty() {
+        return None;
+    }
+    let mut sorted = null.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    Some(sorted[((0.95 * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len()) - 1])
+}
+
+fn finite_min(v: &[f64]) -> f64 {
+    v.iter()
+        .copied()
+        .filter(|x| !x.is_nan())
+        .fold(f64::INFINITY, f64::min)
+}
+
+fn array(name: &str, components: usize, values: Vec<f64>, kind: ArrayKind) -> DataArray {
+    DataArray {
+        name: name.into(),
+        components,
+        values,
+        kind,
+        value_type: ValueType::Double,
+    }
+}
+
+/// The arrays of one contrast's results.
+fn result_arrays(r: &ContrastResult) -> Vec<DataArray> {
+    let statistic = if r.rows == 1 { "t" } else { "F" };
+    let mut arrays = vec![
+        array(statistic, 1, r.statistic.clone(), ArrayKind::Scalars),
+        array("beta", r.rows, r.estimate.clone(), ArrayKind::Field),
+        array("beta_std", r.rows, r.standardised.clone(), ArrayKind::Field),
+        array("p", 1, r.p.clone(), ArrayKind::Field),
+    ];
+    let mut field = |name: &str, values: &Option<Vec<f64>>| {
+        if let Some(v) = values {
+            arrays.push(array(name, 1, v.clone(), ArrayKind::Field));
+        }
+    };
+    field("q", &r.q);
+    field("p_fwer", &r.p_fwer);
+    field("tfce", &r.tfce);
+    field("p_tfce", &r.p_tfce);
+    if let Some(c) = &r.clusters {
+        let labels = c.found.labels.iter().map(|&l| l as f64).collect();
+        arrays.push(DataArray {
+            value_type: ValueType::Int,
+            ..array("cluster", 1, labels, ArrayKind::Field)
+        });
+        arrays.push(array("p_cluster", 1, c.element_p(), ArrayKind::Field));
+    }
+    arrays
+}
+
+/// clusters.csv: one row per cluster.
+fn clusters_csv(r: &ContrastResult, centre: &dyn Fn(usize) -> [f64; 3]) -> Option<String> {
+    let c = r.clusters.as_ref()?;
+    let mut text = String::from(
+        "cluster,sign,elements,area_mm2,mass,peak,peak_element,peak_x,peak_y,peak_z,p_area,p_mass\n",
+    );
+    for (k, cluster) in c.found.clusters.iter().enumerate() {
+        let [x, y, z] = centre(cluster.peak_element);
+        text += &format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            cluster.id,
+            if cluster.positive { "+" } else { "-" },
+            cluster.elements,
+            cluster.area,
+            cluster.mass,
+            cluster.peak,
+            cluster.peak_element,
+            x,
+            y,
+            z,
+            c.p_area[k],
+            c.p_mass[k]
+        );
+    }
+    Some(text)
+}
+
+/// A folder name from a contrast's name.
+fn slug(k: usize, name: &str) -> String {
+    let clean: String = name
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .take(40)
+        .collect();
+    format!("{}_{}", k + 1, clean.trim_matches('_'))
+}
+
+/// Reads, tests every contrast, writes DIR/stats.vtk, DIR/clusters.csv and DIR/summary.json
+/// (with several contrasts, each one's files in DIR/K_NAME/), prints the summary.
+pub fn run(args: &StatsArgs) -> Result<(), CliError> {
+    let data = vtk::read_polydata(&args.input)?;
+    let support = if args.cell {
+        Support::Cells
+    } else {
+        Support::Points
+    };
+    let triangles = data
+        .triangles()
+        .map_err(|m| CliError::Input(format!("{}: {m}", args.input.display())))?;
+    if args.cell && data.cell_count() != triangles.len() {
+        return Err(CliError::Input(format!(
+            "{}: --cell needs a mesh of triangles only ({} cells, {} triangles)",
+            args.input.display(),
+            data.cell_count(),
+            triangles.len()
+        )));
+    }
+    let points: Vec<[f64; 3]> = data.points.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let mesh = Mesh::new(points.clone(), triangles.clone())
+        .map_err(|e| CliError::Input(format!("{}: {e}", args.input.display())))?;
+    let arrays = if args.cell {
+        &data.cell_data
+    } else {
+        &data.point_data
+    };
+    let find = |name: &str| {
+        arrays.iter().find(|a| a.name == name).ok_or_else(|| {
+            let names: Vec<&str> = arrays.iter().map(|a| a.name.as_str()).collect();
+            CliError::Input(format!(
+                "{}: no {} array named '{name}' (it has: {})",
+                args.input.display(),
+                if args.cell { "cell" } else { "point" },
+                names.join(", ")
+            ))
+        })
+    };
+    let values = find(&args.array)?;
+    let design = read_design(args)?;
+    if values.components != design.subjects() {
+        return Err(CliError::Input(format!(
+            "{}: array '{}' has {} components, the design {} subjects (rows)",
+            args.input.display(),
+            args.array,
+            values.components,
+            design.subjects()
+        )));
+    }
+    let observations =
+        Observations::new(values.components, values.values.clone()).map_err(stats_error)?;
+    let contrasts = args
+        .contrasts
+        .iter()
+        .map(|c| read_contrast(c, &design))
+        .collect::<Result<Vec<_>, _>>()?;
+    let exclude = match &args.exclude {
+        Some(name) => {
+            let a = find(name)?;
+            if a.components != 1 {
+                return Err(CliError::Input(format!(
+                    "--exclude {name}: the array has {} components, not 1",
+                    a.components
+                )));
+            }
+            Some(a.values.iter().map(|&v| v != 0.0).collect())
+        }
+        None => None,
+    };
+    let rows = match &args.row_mask {
+        Some(path) => {
+            let numbers = medial_stats::design::parse_matrix(&read_text(path)?).map_err(
+                |(place, problem)| {
+                    CliError::Input(format!("{}, {place}: {problem}", path.display()))
+                },
+            )?;
+            Some(numbers.iter().flatten().map(|&v| v != 0.0).collect())
+        }
+        None => None,
+    };
+    let options = Options {
+        tail: if args.two_sided {
+            Tail::Both
+        } else {
+            Tail::Positive
+        },
+        permutations: args.permutations,
+        seed: args.seed,
+        cluster_threshold: args.threshold,
+        tfce: args.tfce.then_some(TfceParameters {
+            extent_power: args.tfce_e,
+            height_power: args.tfce_h,
+            step: args.tfce_dh,
+        }),
+        fdr: args.fdr,
+        min_observations: args.min_observations,
+        exclude,
+        rows,
+        fwhm: args.fwhm,
+    };
+    let elements = Elements::new(&mesh, support);
+    let study =
+        Study::new(&design, &observations, Some(&elements), options).map_err(stats_error)?;
+    let centre = |e: usize| match support {
+        Support::Points => points[e],
+        Support::Cells => {
+            let t = triangles[e];
+            [0, 1, 2].map(|d| t.iter().map(|&i| points[i][d]).sum::<f64>() / 3.0)
+        }
+    };
+    std::fs::create_dir_all(&args.out).map_err(|e| CliError::io(&args.out, e))?;
+    let mut summaries = Vec::new();
+    for (k, contrast) in contrasts.iter().enumerate() {
+        let r = study.test(contrast).map_err(stats_error)?;
+        let folder = if contrasts.len() == 1 {
+            args.out.clone()
+        } else {
+            args.out.join(slug(k, contrast.name()))
+        };
+        std::fs::create_dir_all(&folder).map_err(|e| CliError::io(&folder, e))?;
+        let mut out = PolyData::from_triangles(&data.points, &triangles);
+        if args.cell {
+            out.cell_data = result_arrays(&r);
+        } else {
+            out.point_data = result_arrays(&r);
+        }
+        vtk::write_polydata(&folder.join("stats.vtk"), &out, write_options(true))?;
+        if let Some(text) = clusters_csv(&r, &centre) {
+            write_text(&folder.join("clusters.csv"), &text)?;
+        }
+        summaries.push(contrast_summary(contrast, &r, folder));
+    }
+    let summary = Summary {
+        input: args.input.clone(),
+        array: args.array.clone(),
+        support: if args.cell { "cells" } else { "points" },
+        subjects: study.design().subjects(),
+        elements: elements.len(),
+        design_columns: design.names().to_vec(),
+        fwhm_mm: args.fwhm,
+        diffusion_time_mm2: args.fwhm.map(diffusion_time),
+        tfce: args.tfce.then_some(TfceSettings {
+            e: args.tfce_e,
+            h: args.tfce_h,
+            dh: args.tfce_dh,
+        }),
+        contrasts: summaries,
+    };
+    write_json(&args.out.join("summary.json"), &summary)?;
+    print_json(&summary)?;
+    eprintln!("results in {}", args.out.display());
+    Ok(())
+}
+
+fn contrast_summary(contrast: &Contrast, r: &ContrastResult, folder: PathBuf) -> ContrastSummary {
+    let magnitude: Vec<f64> = match r.tail {
+        Tail::Both => r.statistic.iter().map(|v| v.abs()).collect(),
+        Tail::Positive => r.statistic.clone(),
+    };
+    let clusters = r.clusters.as_ref();
+    ContrastSummary {
+        name: r.name.clone(),
+        folder,
+        weights: contrast
+            .matrix()
+            .row_iter()
+            .map(|row| row.iter().copied().collect())
+            .collect(),
+        statistic: if r.rows == 1 { "t" } else { "F" },
+        two_sided: r.tail == Tail::Both,
+        elements_tested: r.statistic.iter().filter(|v| !v.is_nan()).count(),
+        max_statistic: magnitude
+            .iter()
+            .copied()
+            .filter(|v| !v.is_nan())
+            .fold(f64::NEG_INFINITY, f64::max),
+        min_p: finite_min(&r.p),
+        permutations: r.permutations.map(|p| p.count),
+        exact_permutations: r.permutations.map(|p| p.exact),
+        seed: r.permutations.filter(|p| !p.exact).map(|p| p.seed),
+        min_p_fwer: r.p_fwer.as_deref().map(finite_min),
+        fwer_significant_elements: r
+            .p_fwer
+            .as_ref()
+            .map(|p| p.iter().filter(|&&v| v <= 0.05).count()),
+        cluster_threshold: clusters.map(|c| c.threshold),
+        clusters: clusters.map(|c| c.found.clusters.len()),
+        significant_clusters: clusters
+            .filter(|_| r.permutations.is_some())
+            .map(|c| c.p_area.iter().filter(|&&p| p <= 0.05).count()),
+        min_p_tfce: r.p_tfce.as_deref().map(finite_min),
+        critical_statistic: critical(&r.null.statistic),
+        critical_cluster_area_mm2: critical(&r.null.area),
+        critical_tfce: critical(&r.null.tfce),
+    }
+}
