@@ -268,6 +268,13 @@ impl<'a> Study<'a> {
         });
         let (statistic, tfce_values, null, permutations) = if options.permutations > 0 {
             let scheme = Scheme::choose(self.design.matrix(), options.permutations, options.seed);
+            if scheme.len() == 1 {
+                return Err(StatsError::Data(format!(
+                    "contrast `{}`: every subject has the same design row, so no permutation \
+                     changes the statistic (a one-sample test needs sign flips)",
+                    contrast.name()
+                )));
+            }
             let permuted = run(&glm, &scheme, tail, spatial);
             let summary = PermutationSummary {
                 count: scheme.len(),

@@ -3,7 +3,7 @@
 //! Statistics on meshes in correspondence: every subject's measure at the same elements (points
 //! or triangles of one mesh), a general linear model at every element, and inference corrected
 //! over the mesh by permutations (maximum statistic, clusters, TFCE), as cmrep's `meshglm` and
-//! FSL's PALM do it. The formulas are in the project's SPEC §10 and in each module.
+//! FSL's PALM do it. The formulas are in the project's docs/stats.md and in each module.
 //!
 //! A [`Study`] takes a [`Design`], [`Observations`], the mesh's [`Elements`] and [`Options`];
 //! [`Study::test`] gives a [`ContrastResult`] for each [`Contrast`]. Results are the same bits
@@ -17,7 +17,7 @@
 //! | [`contrast`] | contrasts by name or vector, F-tests | [`Contrast`] |
 //! | [`glm`] | least squares at every element, t and F, parametric p, missing values | [`Glm`], [`Observations`], [`Tail`] |
 //! | [`permutation`] | Freedman–Lane permutations, seeded or exact, and their maxima | [`Scheme`], [`NullDistributions`] |
-//! | [`mesh`] | element areas and adjacency, clusters, TFCE, heat-diffusion smoothing | [`Mesh`], [`Elements`], [`find_clusters`], [`tfce()`], [`smooth`] |
+//! | [`mesh`] | element areas and adjacency, clusters, TFCE, heat-diffusion smoothing | [`Mesh`], [`Elements`], [`find_clusters`], [`cluster_outlines`], [`tfce()`], [`smooth`] |
 //! | [`fdr`] | Benjamini–Hochberg q-values | [`q_values`] |
 //! | [`analysis`] | an analysis from data to maps | [`Study`], [`Options`], [`ContrastResult`] |
 //! | [`error`] | the one error type | [`StatsError`] |
@@ -40,7 +40,7 @@ pub use error::{Result, StatsError};
 pub use fdr::q_values;
 pub use glm::{Glm, GlmOptions, Observations, Tail};
 pub use mesh::{
-    diffusion_time, find_clusters, smooth, tfce, Cluster, Clusters, Elements, Mesh, Support,
-    TfceParameters,
+    cluster_outlines, diffusion_time, find_clusters, smooth, tfce, Cluster, Clusters, Elements,
+    Mesh, Support, TfceParameters,
 };
 pub use permutation::{NullDistributions, Scheme};

@@ -127,7 +127,8 @@ pub enum Command {
     /// component per subject, as meshglm takes it: t or F and parametric p, with --permutations
     /// the FWER-corrected p of the maximum statistic, of clusters (--threshold) and of TFCE
     /// (--tfce). Writes DIR/stats.vtk (arrays beta, t, p, p_fwer, cluster, p_cluster, tfce,
-    /// p_tfce), DIR/clusters.csv and DIR/summary.json (printed too).
+    /// p_tfce), DIR/clusters.csv, the clusters' outlines DIR/clusters_edges.vtk and
+    /// DIR/summary.json (printed too).
     Stats(stats::StatsArgs),
 }
 

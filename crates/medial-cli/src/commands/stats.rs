@@ -6,8 +6,8 @@ use crate::error::CliError;
 use crate::output::{print_json, write_json, write_options, write_text};
 use medial_io::vtk::{self, ArrayKind, DataArray, PolyData, ValueType};
 use medial_stats::{
-    diffusion_time, Contrast, ContrastResult, Design, Elements, Mesh, Observations, Options, Study,
-    Support, TableOptions, Tail, TfceParameters,
+    cluster_outlines, diffusion_time, Contrast, ContrastResult, Design, Elements, Mesh,
+    Observations, Options, Study, Support, TableOptions, Tail, TfceParameters,
 };
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -282,8 +282,9 @@ fn slug(k: usize, name: &str) -> String {
     format!("{}_{}", k + 1, clean.trim_matches('_'))
 }
 
-/// Reads, tests every contrast, writes DIR/stats.vtk, DIR/clusters.csv and DIR/summary.json
-/// (with several contrasts, each one's files in DIR/K_NAME/), prints the summary.
+/// Reads, tests every contrast, writes DIR/stats.vtk, DIR/clusters.csv, DIR/clusters_edges.vtk
+/// and DIR/summary.json (with several contrasts, each one's files in DIR/K_NAME/), prints the
+/// summary.
 pub fn run(args: &StatsArgs) -> Result<(), CliError> {
     let data = vtk::read_polydata(&args.input)?;
     let support = if args.cell {
@@ -412,6 +413,24 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
         vtk::write_polydata(&folder.join("stats.vtk"), &out, write_options(true))?;
         if let Some(text) = clusters_csv(&r, &centre) {
             write_text(&folder.join("clusters.csv"), &text)?;
+        }
+        if let Some(c) = &r.clusters {
+            let outline = cluster_outlines(&mesh, support, &c.found.labels);
+            let ids = outline.iter().map(|&(_, id)| id as f64).collect();
+            let edges = PolyData {
+                points: data.points.clone(),
+                lines: outline.iter().map(|(pair, _)| pair.to_vec()).collect(),
+                cell_data: vec![DataArray {
+                    value_type: ValueType::Int,
+                    ..array("cluster", 1, ids, ArrayKind::Scalars)
+                }],
+                ..PolyData::default()
+            };
+            vtk::write_polydata(
+                &folder.join("clusters_edges.vtk"),
+                &edges,
+                write_options(true),
+            )?;
         }
         summaries.push(contrast_summary(contrast, &r, folder));
     }

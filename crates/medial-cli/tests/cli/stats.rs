@@ -84,6 +84,21 @@ fn stats_on_meshglm_points_writes_every_map_and_the_clusters() {
         assert!(t[element] > 3.0);
     }
     assert!(contrast["significant_clusters"].as_u64().unwrap() >= 1);
+    // The outlines: edges of the mesh, each with the id of a cluster of the map.
+    let edges = read_polydata(&out.join("clusters_edges.vtk")).unwrap();
+    assert!(!edges.lines.is_empty());
+    let edge_ids = &edges
+        .cell_data
+        .iter()
+        .find(|a| a.name == "cluster")
+        .unwrap()
+        .values;
+    for (line, &id) in edges.lines.iter().zip(edge_ids) {
+        assert!(
+            line.iter().any(|&i| ids[i] == id),
+            "{line:?} outlines cluster {id}"
+        );
+    }
     let written: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(written, summary);

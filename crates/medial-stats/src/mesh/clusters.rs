@@ -2,7 +2,9 @@
 //! side, and on the negative side too for a two-sided test). A cluster's extent is its area
 //! (the sum of its elements' areas, mm²) and its mass the sum of (|statistic| − h) × area.
 
-use super::{Elements, Forest};
+use std::collections::BTreeMap;
+
+use super::{Elements, Forest, Mesh, Support};
 use crate::Tail;
 
 /// A cluster of elements above the threshold.
@@ -134,6 +136,68 @@ pub fn find_clusters(
     Clusters { labels, clusters }
 }
 
+/// The outlines of clusters on the mesh, as meshglm's edges file draws them: the triangle edges
+/// (pairs of point indices) between a cluster's region and the rest, or on the mesh's border,
+/// each with the id of the cluster it outlines (the larger if two clusters meet). A cluster's
+/// region is its triangles on cells, and on points the triangles whose three points are in it
+/// (a cluster of one point has no outline). Edges across a seam (coincident points) are not
+/// borders.
+///
+/// ```
+/// use medial_stats::{cluster_outlines, Mesh, Support};
+///
+/// // A square of two triangles, the first in cluster 1: its two outer edges and the diagonal.
+/// let mesh = Mesh::new(
+///     vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+///     vec![[0, 1, 2], [0, 2, 3]],
+/// )?;
+/// let outline = cluster_outlines(&mesh, Support::Cells, &[1, 0]);
+/// assert_eq!(outline, [([0, 1], 1), ([0, 2], 1), ([1, 2], 1)]);
+/// # Ok::<(), medial_stats::StatsError>(())
+/// ```
+pub fn cluster_outlines(
+    mesh: &Mesh,
+    support: Support,
+    labels: &[usize],
+) -> Vec<([usize; 2], usize)> {
+    let cell_labels: Vec<usize> = match support {
+        Support::Cells => labels.to_vec(),
+        Support::Points => mesh
+            .triangles()
+            .iter()
+            .map(|t| {
+                let l = labels[t[0]];
+                if t.iter().all(|&i| labels[i] == l) {
+                    l
+                } else {
+                    0
+                }
+            })
+            .collect(),
+    };
+    let place = mesh.places();
+    // Every edge by its places: the point pair first seen and its triangles' labels.
+    let mut edges: BTreeMap<(usize, usize), ([usize; 2], Vec<usize>)> = BTreeMap::new();
+    for (t, tri) in mesh.triangles().iter().enumerate() {
+        for (a, b) in [(tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])] {
+            let key = (place[a].min(place[b]), place[a].max(place[b]));
+            edges
+                .entry(key)
+                .or_insert_with(|| ([a.min(b), a.max(b)], Vec::new()))
+                .1
+                .push(cell_labels[t]);
+        }
+    }
+    edges
+        .into_values()
+        .filter_map(|(pair, sides)| {
+            let largest = sides.iter().copied().max().unwrap_or(0);
+            let border = sides.len() == 1 || sides.iter().any(|&l| l != sides[0]);
+            (largest > 0 && border).then_some((pair, largest))
+        })
+        .collect()
+}
+
 /// The largest area and the largest mass of the clusters of `statistic` (0 without clusters):
 /// the statistics of cluster inference, for one permutation.
 pub(crate) fn largest_extents(
@@ -163,6 +227,32 @@ mod tests {
     use crate::mesh::tests::{brute_force_components, grid};
     use crate::mesh::Support;
     use proptest::prelude::*;
+
+    #[test]
+    fn outlines_follow_the_sheet_across_seams() {
+        // A square of two triangles whose diagonal is written twice.
+        let mesh = Mesh::new(
+            vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 1.0, 0.0],
+            ],
+            vec![[0, 1, 2], [3, 4, 5]],
+        )
+        .unwrap();
+        let square = [([0, 1], 2), ([1, 2], 2), ([4, 5], 2), ([3, 5], 2)];
+        let mut outline = cluster_outlines(&mesh, Support::Cells, &[2, 2]);
+        outline.sort_by_key(|e| (e.0[0].min(3), e.0));
+        let mut expected = square.to_vec();
+        expected.sort_by_key(|e| (e.0[0].min(3), e.0));
+        assert_eq!(outline, expected);
+        assert_eq!(cluster_outlines(&mesh, Support::Points, &[2; 6]).len(), 4);
+        // One point in a cluster outlines no triangle.
+        assert!(cluster_outlines(&mesh, Support::Points, &[0, 1, 0, 0, 0, 0]).is_empty());
+    }
 
     proptest! {
         /// Clusters equal the connected components found by breadth-first search, with their

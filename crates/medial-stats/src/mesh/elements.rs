@@ -41,6 +41,17 @@ impl Mesh {
     pub fn triangles(&self) -> &[[usize; 3]] {
         &self.triangles
     }
+
+    /// For every point, the first point at its position: coincident points are one place of
+    /// the sheet (a seam written twice).
+    pub(crate) fn places(&self) -> Vec<usize> {
+        let mut first_at: HashMap<[u64; 3], usize> = HashMap::new();
+        self.points
+            .iter()
+            .enumerate()
+            .map(|(i, x)| *first_at.entry(x.map(|c| (c + 0.0).to_bits())).or_insert(i))
+            .collect()
+    }
 }
 
 /// Which elements carry the data.
@@ -104,13 +115,7 @@ impl Elements {
     /// ```
     pub fn new(mesh: &Mesh, support: Support) -> Self {
         let p = &mesh.points;
-        // Coincident points: one place of the sheet.
-        let mut first_at: HashMap<[u64; 3], usize> = HashMap::new();
-        let place: Vec<usize> = p
-            .iter()
-            .enumerate()
-            .map(|(i, x)| *first_at.entry(x.map(|c| (c + 0.0).to_bits())).or_insert(i))
-            .collect();
+        let place = mesh.places();
         let triangle_area: Vec<f64> = mesh
             .triangles
             .iter()

@@ -10,7 +10,7 @@
 //! |---|---|
 //! | `elements` | [`Mesh`], [`Support`], [`Elements`]: areas, adjacency, the diffusion operator |
 //! | `forest` | union–find with component extents and additive values, shared by clusters and TFCE |
-//! | `clusters` | connected supra-threshold clusters: extent (area, mm²) and mass |
+//! | `clusters` | connected supra-threshold clusters: extent (area, mm²) and mass; their outlines |
 //! | `tfce` | threshold-free cluster enhancement |
 //! | `smooth` | heat diffusion with a FWHM in mm |
 
@@ -21,7 +21,7 @@ mod smooth;
 mod tfce;
 
 pub(crate) use clusters::largest_extents;
-pub use clusters::{find_clusters, Cluster, Clusters};
+pub use clusters::{cluster_outlines, find_clusters, Cluster, Clusters};
 pub use elements::{Elements, Mesh, Support};
 pub(crate) use forest::Forest;
 pub use smooth::{diffusion_time, smooth};

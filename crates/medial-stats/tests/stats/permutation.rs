@@ -281,3 +281,35 @@ fn the_same_bits_for_one_and_two_threads() {
     .unwrap();
     assert_ne!(other.null.statistic, one.null.statistic);
 }
+
+#[test]
+fn a_design_that_no_permutation_changes_is_refused() {
+    let x = DMatrix::from_element(6, 1, 1.0);
+    let d = Design::new(vec!["intercept".into()], x).unwrap();
+    let y = Observations::new(6, noise(6, 3, 1)).unwrap();
+    let c = Contrast::parse("intercept", &d).unwrap();
+    let options = Options {
+        permutations: 100,
+        ..Options::default()
+    };
+    let message = Study::new(&d, &y, None, options.clone())
+        .unwrap()
+        .test(&c)
+        .unwrap_err()
+        .to_string();
+    assert!(message.contains("sign flips"), "{message}");
+    // Parametric inference is fine.
+    let r = Study::new(
+        &d,
+        &y,
+        None,
+        Options {
+            permutations: 0,
+            ..options
+        },
+    )
+    .unwrap()
+    .test(&c)
+    .unwrap();
+    assert!(r.p.iter().all(|p| (0.0..=1.0).contains(p)));
+}
