@@ -138,15 +138,16 @@ pub fn write(jobs: &Jobs<'_>, options: &SlurmOptions) -> Result<Vec<PathBuf>, Cl
          runs once every task has ended (afterany: also after failed tasks). Arguments go to \
          both sbatch calls (e.g. --account=lab --partition=short).\n\
          set -eu\n\
+         results={}\n\
          array=$(sbatch --parsable \"$@\" {})\n\
          array=${{array%%;*}}\n\
          gather=$(sbatch --parsable \"$@\" --dependency=afterany:\"$array\" {})\n\
          gather=${{gather%%;*}}\n\
          echo \"submitted the array job $array ({tasks} tasks) and the gather job $gather; \
-         follow them with: squeue -j $array,$gather; results: {}\"\n",
+         follow them with: squeue -j $array,$gather; results: $results\"\n",
+        quote(&dir.join(super::gather::COHORT_CSV))?,
         quote(&batch_path)?,
         quote(&gather_path)?,
-        dir.join(super::gather::COHORT_CSV).display(),
     );
     let submit_path = dir.join(SUBMIT_SCRIPT);
     for (path, text) in [

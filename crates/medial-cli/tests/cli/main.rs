@@ -12,6 +12,7 @@ mod check;
 mod fit;
 mod guards;
 mod inflate;
+mod reliability;
 mod resume;
 mod stats;
 mod template;
