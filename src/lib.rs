@@ -11,7 +11,7 @@
 //! | to … | use |
 //! |---|---|
 //! | read a cmrep template, a mesh, a segmentation | [`io::cmrep::read_template`], [`io::mesh::read_mesh`], [`io::nifti_volume::read_nifti`] |
-//! | build a template from a medial sheet | [`build::inflate()`], [`build::project()`] |
+//! | build a template from a medial sheet | [`construction::inflate()`], [`construction::project()`] |
 //! | fit as `medial fit` does without a config | [`fit::run::automatic`] (the plan and the initial alignment), then [`fit::run::Fit::run`] |
 //! | describe a fit yourself | [`fit::FitSpec`] of [`fit::StageSpec`]s, prepared against [`fit::Target`]s by [`fit::run::Fit::prepare`] |
 //! | set up the flow | [`flow::Flow`] with [`flow::FlowParams`] |

@@ -2,7 +2,6 @@
 //! model by the prisms, the gradient against finite differences, determinism across thread
 //! counts, and the real cmrep template and sphere from `shared/data`.
 
-use std::time::Instant;
 
 use medial::attachment::dice::{DiceAttachment, DiceParams, DiceValue};
 use medial::image::rasterize::{self, grid_around, rasterize};
@@ -377,7 +376,7 @@ fn dice_matches_the_voxel_overlap_of_the_rasterized_model() {
 /// (b) A model against the smoothed (0.2 mm) rasterization of itself at 0.5 mm voxels scores
 /// ≥ 0.98 at every sampling, the finer ones converging (to within 0.002) on the exact overlap
 /// of the blurred image, `1 − ∫_model (1 − f) / V` (the blur of the edge: about 0.14 mm × area /
-/// volume). SPEC §5's corner rule scored 0.927 here at the default sampling.
+/// volume). docs/method.md §6.2's corner rule scored 0.927 here at the default sampling.
 #[test]
 fn a_model_matches_its_own_rasterization() {
     let disc = thick_disc(6, 24.0, 12.0);
@@ -413,7 +412,7 @@ fn a_model_matches_its_own_rasterization() {
 
 /// The cmrep template against its own rasterization, and the timing of one evaluation. t001 is
 /// thin (mean spoke 1.4 mm, area / volume ≈ 1 /mm, under six 0.5 mm voxels across), so the blur
-/// of the image edge costs it about 0.09 (SPEC §5's corner rule: 0.893).
+/// of the image edge costs it about 0.09 (docs/method.md §6.2's corner rule: 0.893).
 #[test]
 fn the_real_template_against_its_own_rasterization() {
     let model = t001();
@@ -429,54 +428,6 @@ fn the_real_template_against_its_own_rasterization() {
     let v = dice.dice(&model.q, Some(&mut grad)).unwrap();
     println!("t001 vs itself: {v:?}");
     assert!(v.dice > 0.9, "{v:?}");
-    // Shortest of repeated runs (robust to a loaded machine): CPU time of the one worker
-    // thread with 1 thread, wall time with 2.
-    for threads in [1, 2] {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let with_grad = best_time(&pool, || {
-            dice.dice(&model.q, Some(&mut grad)).unwrap();
-        });
-        let value_only = best_time(&pool, || {
-            dice.dice(&model.q, None).unwrap();
-        });
-        let clock = if threads == 1 { "thread CPU" } else { "wall" };
-        println!(
-            "t001 (k = {}, {} samples, {} prisms), {threads} thread(s), {clock} time: evaluate \
-             {:.2} ms with gradient, {:.2} ms value only",
-            model.q.len(),
-            dice.sample_count(),
-            dice.prism_count(),
-            1e3 * with_grad,
-            1e3 * value_only
-        );
-    }
-}
-
-/// The shortest of 30 runs of `f` in `pool`, in seconds: CPU time of the calling worker
-/// thread if the pool has one thread (Linux), else wall time.
-fn best_time(pool: &rayon::ThreadPool, mut f: impl FnMut() + Send) -> f64 {
-    let single = pool.current_num_threads() == 1;
-    pool.install(|| {
-        (0..30)
-            .map(|_| {
-                let (start, cpu) = (Instant::now(), thread_cpu_seconds());
-                f();
-                match (single, cpu, thread_cpu_seconds()) {
-                    (true, Some(a), Some(b)) => b - a,
-                    _ => start.elapsed().as_secs_f64(),
-                }
-            })
-            .fold(f64::INFINITY, f64::min)
-    })
-}
-
-/// CPU time of the current thread from `/proc/thread-self/schedstat` (nanoseconds on CPU).
-fn thread_cpu_seconds() -> Option<f64> {
-    let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    Some(text.split_whitespace().next()?.parse::<f64>().ok()? * 1e-9)
 }
 
 /// A disc model with a non-trivial Dice and gradient, and its image.
@@ -511,7 +462,7 @@ fn centre_pushed(disc: &Model, q: &[Vec3], by: f64) -> Vec<Vec3> {
 }
 
 /// A fold is never rewarded: a medial point pushed out through the boundary into the
-/// background turns prisms inside out there, and the Dice falls (SPEC §5's signed
+/// background turns prisms inside out there, and the Dice falls (docs/method.md §6.2's signed
 /// denominator `V + V_img` would let it rise), with an exact gradient at the folded model.
 #[test]
 fn a_fold_lowers_the_dice() {
@@ -670,13 +621,7 @@ fn rasterized_sphere_has_the_enclosed_volume() {
         / 6.0;
     for spacing in [0.02, 0.01] {
         let (dims, grid) = grid_around(&mesh, spacing, 0.05).unwrap();
-        let start = Instant::now();
         let volume = rasterize(&mesh, dims, grid).unwrap().integral();
-        println!(
-            "sphere at {spacing} mm: rasterized {volume:.6} vs enclosed {enclosed:.6} ({:+.3} %), {dims:?} in {:.1} ms",
-            100.0 * (volume / enclosed - 1.0),
-            1e3 * start.elapsed().as_secs_f64()
-        );
         assert!((volume / enclosed - 1.0).abs() < 0.02);
     }
 }

@@ -1,11 +1,11 @@
-//! Template inflation from a medial sheet (SPEC §9): flat slab, the paper's three-sheet toy,
+//! Template inflation from a medial sheet (docs/method.md §9.1): flat slab, the paper's three-sheet toy,
 //! the real placenta sheet against cmrep's own inflation, Loop subdivision, and errors.
 
 use std::collections::{BTreeMap, HashMap};
 use std::f64::consts::PI;
 use std::path::Path;
 
-use medial::build::inflate::{inflate, self_intersections, Inflated, MedialSheet, RadiusLimit};
+use medial::construction::inflate::{inflate, self_intersections, Inflated, MedialSheet, RadiusLimit};
 use medial::mesh::topology::{signed_volume, MeshDefect};
 use medial::synth::parameter_grid;
 use medial::{Error, Vec3};

@@ -2,7 +2,7 @@
 //! toy (three sheets meeting at a seam), their templates rasterized (the templates' own medial
 //! points are the true sheet; its radius is their distance to the templates' boundary).
 
-use medial::build::{sheet_of_mask, Sampling, ShapeSheet};
+use medial::construction::{sheet_of_mask, Sampling, ShapeSheet};
 use medial::image::rasterize::{grid_around, rasterize};
 use medial::mesh::distance::SurfaceDistance;
 use medial::model::{MedialTemplate, SpokeMetrics};

@@ -123,18 +123,6 @@ fn hippocampus_meshes_and_speed() {
             "{name}"
         );
     }
-    let bytes = std::fs::read(data_file("keops/hippos_source.vtk")).expect("read");
-    let runs = 20;
-    let start = std::time::Instant::now();
-    for _ in 0..runs {
-        parse_polydata(&bytes, Path::new("hippos_source.vtk")).expect("parse");
-    }
-    let per_parse = start.elapsed().as_secs_f64() / f64::from(runs);
-    println!(
-        "hippos_source.vtk ({} KB): {:.2} ms per parse",
-        bytes.len() / 1024,
-        per_parse * 1e3
-    );
 }
 
 #[test]

@@ -5,7 +5,7 @@
 
 use crate::error::CliError;
 use medial_core::attachment::varifold::Kind;
-use medial_core::fit::augmented_lagrangian::{CoarseTime, MuUpdate, Settle};
+use medial_core::fit::augmented_lagrangian::{CoarseTime, Extend, MuUpdate, Settle};
 use medial_core::fit::optimize::{LbfgsOptions, ProgressRule};
 use medial_core::fit::spec::{kind_name, kind_of_name};
 use medial_core::fit::{
@@ -186,6 +186,14 @@ pub struct StageConfig {
     /// The attachment's relative change over an AL iteration at most which it has settled.
     #[serde(default = "defaults::settle_data_change")]
     pub settle_data_change: f64,
+    /// Go on past `al_iterations`, up to this many more AL iterations, while the largest `|C|`
+    /// is above `extend_above` and each AL iteration at least halves it (default: off).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub extend_al_iterations: Option<usize>,
+    /// With `extend_al_iterations`: the largest `|C|` (the constraints' unit) above which the
+    /// AL iterations go on.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub extend_above: Option<f64>,
     /// Stop when ‖∇E‖ falls below this fraction of its initial value.
     #[serde(default = "defaults::gradient_tolerance")]
     pub gradient_tolerance: f64,
@@ -360,6 +368,8 @@ impl StageConfig {
             settle_data_change: s
                 .settle
                 .map_or_else(defaults::settle_data_change, |t| t.data_change),
+            extend_al_iterations: s.extend.map(|e| e.at_most),
+            extend_above: s.extend.map(|e| e.above),
             gradient_tolerance: l.gradient_tolerance,
             relative_decrease: l.relative_decrease,
             progress_window: l.progress.map_or(0, |p| p.window),
@@ -404,6 +414,10 @@ impl StageConfig {
                     max_abs_constraint,
                     data_change: self.settle_data_change,
                 }),
+                extend: self
+                    .extend_al_iterations
+                    .zip(self.extend_above)
+                    .map(|(at_most, above)| Extend { above, at_most }),
                 coarse: self.coarse_time_steps.map(|time_steps| CoarseTime {
                     time_steps,
                     al_iterations: self
@@ -512,6 +526,12 @@ impl StageConfig {
                     self.name
                 ));
             }
+        }
+        if self.extend_al_iterations.is_some() != self.extend_above.is_some() {
+            return Err(format!(
+                "stage '{}': extend_al_iterations and extend_above go together",
+                self.name
+            ));
         }
         if let Some(a) = self.coarse_al_iterations {
             if self.coarse_time_steps.is_none() {

@@ -85,6 +85,9 @@ pub struct Start {
     pub model: Model,
     /// The initial map, template → subject.
     pub alignment: Matrix4<f64>,
+    /// The template as given (written as `template.vtk`, so that `medial apply` can carry the
+    /// given template's space by the alignment and the moves after it).
+    pub given: Model,
 }
 
 /// The config of a fit: `config` with the flags of `inputs` in place of its template and
@@ -157,6 +160,7 @@ fn automatic(inputs: &Inputs, out: &Path) -> Result<Resolved, CliError> {
         start: Some(Start {
             model: start.model,
             alignment: start.alignment,
+            given: model,
         }),
     })
 }
@@ -213,14 +217,18 @@ const ALIGNMENT: &str = "alignment.txt";
 /// The template an automatic fit starts from (the given one carried by [`ALIGNMENT`]), in its
 /// output folder.
 const ALIGNED_TEMPLATE: &str = "aligned_template.vtk";
+/// The template an automatic fit was given, as read (`medial apply` carries its space).
+const GIVEN_TEMPLATE: &str = "template.vtk";
 
 /// An automatic fit's start belongs to its set: the aligned template and the initial map.
 fn write_start(set: &mut ResultSet, start: &Start) -> Result<(), CliError> {
     medial_io::affine::write_affine(&set.file(ALIGNMENT)?, &start.alignment)?;
-    let path = set.file(ALIGNED_TEMPLATE)?;
-    match &start.model {
-        Model::Medial(t) => medial_io::cmrep::write_template(&path, t, write_options(false))?,
-        Model::Plain(mesh) => vtk::write_trimesh(&path, mesh, write_options(false))?,
+    for (name, model) in [(ALIGNED_TEMPLATE, &start.model), (GIVEN_TEMPLATE, &start.given)] {
+        let path = set.file(name)?;
+        match model {
+            Model::Medial(t) => medial_io::cmrep::write_template(&path, t, write_options(false))?,
+            Model::Plain(mesh) => vtk::write_trimesh(&path, mesh, write_options(false))?,
+        }
     }
     Ok(())
 }

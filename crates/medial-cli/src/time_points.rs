@@ -1,4 +1,4 @@
-//! The medial figures of SPEC §6 at every time point of the fitted flow: `time_points.csv`
+//! The medial figures of docs/method.md §4.4 at every time point of the fitted flow: `time_points.csv`
 //! (one row per time point, for a spreadsheet or `numpy.genfromtxt`) and their worst values
 //! over the flow for `summary.json`; among them the inscribed-ball fidelity
 //! ([`medial_core::model::fidelity`]), as `medial check` prints it too. Medial templates only:
@@ -25,7 +25,7 @@ pub struct TimePoint {
     pub mean_spoke_normal_deg: f64,
     /// Largest spoke-length mismatch, %.
     pub max_spoke_mismatch_pct: f64,
-    /// `max_l |C_l(q^n)|` in SPEC §3's units (mm²), whatever the stages' `constraint_units`.
+    /// `max_l |C_l(q^n)|` in docs/method.md §4.3's units (mm²), whatever the stages' `constraint_units`.
     pub max_abs_constraint_mm2: f64,
     /// Smallest and largest local thickness (2 × mean spoke length of an atom), mm.
     pub thickness_range_mm: [f64; 2],
@@ -110,7 +110,7 @@ pub struct OverTime {
     pub max_spoke_normal_deg: f64,
     /// Largest spoke-length mismatch at any time point, %.
     pub max_spoke_mismatch_pct: f64,
-    /// Largest `|C|` at any time point, mm² (SPEC §3's units).
+    /// Largest `|C|` at any time point, mm² (docs/method.md §4.3's units).
     pub max_abs_constraint_mm2: f64,
     /// Smallest local thickness at any time point, mm.
     pub min_thickness_mm: f64,

@@ -1,4 +1,4 @@
-//! cmrep boundary medial templates ("bcm-rep" legacy VTK polydata, SPEC §2) ⇄
+//! cmrep boundary medial templates ("bcm-rep" legacy VTK polydata, docs/method.md §2.3) ⇄
 //! [`MedialTemplate`].
 //!
 //! The file holds the closed boundary triangle mesh and point arrays:

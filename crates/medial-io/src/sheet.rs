@@ -3,7 +3,7 @@
 
 use crate::vtk::{read_polydata, write_polydata, DataArray, PolyData, ValueType, WriteOptions};
 use crate::{Error, Result};
-use medial_core::build::MedialSheet;
+use medial_core::construction::MedialSheet;
 use std::path::Path;
 
 /// Reads a medial sheet: the points and triangles of VTK polydata, and its point array named

@@ -46,6 +46,11 @@ struct CheckReport {
     judged: BallFigures,
     /// Whether the mean residual of the sheet atoms is within `max_residual_pct`.
     medial: bool,
+    /// A fit folder: the `status` its summary.json gives (`converged`, `budget`,
+    /// `constraints_not_met`, `unsound`, `interrupted`); a fit that `medial fit` did not end as
+    /// sound and within its tolerances fails the check whatever its balls.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    fit_status: Option<String>,
 }
 
 /// The fidelity of one configuration.
@@ -82,6 +87,11 @@ pub fn run(args: &CheckArgs) -> Result<(), CliError> {
         worst(time_points.iter())
     };
     let medial = judged.sheet.mean_residual_pct <= args.max_residual;
+    let fit_status = if args.path.is_dir() {
+        Some(fit_status(&args.path)?)
+    } else {
+        None
+    };
     let report = CheckReport {
         source: args.path.clone(),
         poke_tolerance_pct: 100.0 * POKE_TOLERANCE,
@@ -89,8 +99,30 @@ pub fn run(args: &CheckArgs) -> Result<(), CliError> {
         time_points,
         judged,
         medial,
+        fit_status: fit_status.clone(),
     };
     print_json(&report)?;
+    let said = |what: &str| {
+        format!(
+            "{}: summary.json says the fit {what}: `medial fit` did not accept it, whatever its \
+             inscribed balls",
+            args.path.display()
+        )
+    };
+    match fit_status.as_deref() {
+        Some("unsound") => return Err(CliError::Unsound(said("ended unsound (status \"unsound\")"))),
+        Some("constraints_not_met") => {
+            return Err(CliError::ConstraintsNotMet(said(
+                "ended with its constraints above their tolerance (status \"constraints_not_met\")",
+            )))
+        }
+        Some("interrupted") => {
+            return Err(CliError::Input(said(
+                "was stopped before its end (status \"interrupted\"; resume it with medial fit --resume)",
+            )))
+        }
+        _ => {}
+    }
     if medial {
         return Ok(());
     }
@@ -104,6 +136,18 @@ pub fn run(args: &CheckArgs) -> Result<(), CliError> {
         judged.sheet.poking_out,
         judged.sheet.atoms
     )))
+}
+
+/// The `status` of the fit folder `dir`'s summary.json.
+fn fit_status(dir: &Path) -> Result<String, CliError> {
+    let path = dir.join("summary.json");
+    let text = std::fs::read_to_string(&path).map_err(|e| CliError::io(&path, e))?;
+    let summary: serde_json::Value = serde_json::from_str(&text)
+        .map_err(|e| CliError::Input(format!("{}: not JSON: {e}", path.display())))?;
+    summary["status"]
+        .as_str()
+        .map(str::to_owned)
+        .ok_or_else(|| CliError::Input(format!("{}: no \"status\"", path.display())))
 }
 
 /// The worst of each figure over `points` (not empty).

@@ -1,10 +1,10 @@
 //! `medial inflate`: a cmrep medial template from a medial sheet mesh with a radius per vertex
-//! (SPEC §9), optionally Loop-subdivided first. Prints a JSON summary of the template and of
+//! (docs/method.md §9.1), optionally Loop-subdivided first. Prints a JSON summary of the template and of
 //! where inflation lowered a radius too large for the sheet (`radius_limit`).
 
 use crate::error::CliError;
 use crate::output::{model_error, print_json, write_options, TemplateSummary};
-use medial_core::build::inflate::{inflate, RadiusLimit};
+use medial_core::construction::inflate::{inflate, RadiusLimit};
 use medial_core::model::template::MedialTemplate;
 use medial_io::sheet::read_sheet;
 use serde::Serialize;

@@ -3,7 +3,7 @@
 
 use crate::error::CliError;
 use crate::output::{model_error, print_json, write_options, TemplateSummary};
-use medial_core::build::project::{project, ConstraintFigures, ProjectOptions};
+use medial_core::construction::project::{project, ConstraintFigures, ProjectOptions};
 use serde::Serialize;
 use std::path::PathBuf;
 use std::time::Instant;

@@ -5,11 +5,11 @@
 use crate::error::CliError;
 use crate::memory;
 use crate::output::{model_error, print_json, write_json, write_options};
-use medial_core::build::from_shape::{
+use medial_core::construction::from_shape::{
     template_of_shape, Shape, TemplateFigures, TemplateOptions, Verdict, DEFAULT_ATOMS,
     MAX_ANGLE_DEG, MAX_MISMATCH_PCT, TARGET_DICE,
 };
-use medial_core::build::Sampling;
+use medial_core::construction::Sampling;
 use medial_io::nifti_volume::{write_nifti, NiftiType};
 use serde::Serialize;
 use std::path::{Path, PathBuf};

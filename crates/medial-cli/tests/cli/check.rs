@@ -129,6 +129,22 @@ fn constrained_fit_keeps_balls_inscribed_and_an_unconstrained_fit_does_not() {
         "{poking} of {atoms} sheet balls poke out"
     );
     check_outputs(&free, &summary_free, &report_free);
+
+    // A fit that `medial fit` did not accept fails the check whatever its balls: the sound
+    // constrained fit's folder, its status changed as a fit that folded or missed its
+    // tolerance would have written it.
+    for (status, code) in [("unsound", 3), ("constraints_not_met", 4)] {
+        let path = on.join("summary.json");
+        let mut summary: Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        summary["status"] = Value::from(status);
+        std::fs::write(&path, summary.to_string()).unwrap();
+        let o = medial(&["check", s(&on)]);
+        assert_eq!(o.status.code(), Some(code), "{status}: {}", text(&o.stderr));
+        let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(report["fit_status"], status);
+        assert!(text(&o.stderr).contains(status), "{}", text(&o.stderr));
+    }
 }
 
 /// The fit's own outputs agree with `medial check` of its folder: `over_time.ball_fidelity` in

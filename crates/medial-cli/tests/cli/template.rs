@@ -6,7 +6,7 @@
 //! one-line error and a non-zero exit.
 
 use crate::common::{data, f, medial, one_line_error, run_json, s, text};
-use medial_core::build::MedialSheet;
+use medial_core::construction::MedialSheet;
 use medial_core::image::volume::Volume;
 use medial_core::mesh::distance::SurfaceDistance;
 use medial_core::mesh::topology::{check_closed_oriented_manifold, check_outward};
@@ -135,7 +135,6 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
     for (name, shape) in shapes {
         let out = dir.path().join(format!("{name}.vtk"));
         let sheet = dir.path().join(format!("{name}_sheet.vtk"));
-        let start = std::time::Instant::now();
         let figures = run_json(&[
             "template",
             s(&shape),
@@ -145,11 +144,9 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
             s(&sheet),
             "-q",
         ]);
-        let seconds = start.elapsed().as_secs_f64();
-        eprintln!("toy {name} ({seconds:.0} s): {figures:#}");
+        eprintln!("toy {name}: {figures:#}");
         assert_targets(&figures);
         assert_eq!(figures["dice_input_grid"].is_null(), name == "mesh");
-        assert!(seconds < 120.0, "{name}: {seconds:.0} s");
         assert_eq!(
             (figures["sheets"].as_u64(), figures["seams"].as_u64()),
             (Some(3), Some(1))

@@ -6,7 +6,12 @@
 //! With `V`, `c` and `Σ` the volume (mm³), centroid and covariance of each binary shape (voxel
 //! centres in world mm, each voxel weighing its volume; the template rasterized on a grid of the
 //! image's smallest voxel size):
-//! - `s = (V_img / V_tmpl)^{1/3}`,
+//! - `s = (tr Σ_img / tr Σ_tmpl)^{1/2}`, the ratio of the shapes' root-mean-square extents: a
+//!   subject's size, not its volume, which a thicker wall inflates (a sheet twice as thick at
+//!   the same extent has twice the volume: a volume scale of 1.26 would then have to be undone
+//!   by an anisotropic affine map and a projection, and the flow would start from a template
+//!   crushed along its long axes). The wall's thickness is left to the flow: its ratio after the
+//!   similarity, `V_img / (s³ V_tmpl)`, is reported ([`Alignment::thickness_ratio`]),
 //! - `R` is the identity, or `E_img D E_tmplᵀ` for the proper eigenvector frames `E` of the two
 //!   covariances (eigenvalues in increasing order) and each of the four sign matrices
 //!   `D = diag(±1, ±1, ±1)` with `det D = 1` (the principal axes fix `R` up to these signs),
@@ -20,7 +25,7 @@
 //! **Affine after the similarity.** An affine map that is not a similarity does not keep a
 //! model medial (spokes stop being normal to the boundary), so it is not for the flow to follow:
 //! it is applied to the template, which is then projected back onto its constraints
-//! ([`crate::build::project()`]). [`align_affine`] finds it from moments: with the covariances
+//! ([`crate::construction::project()`]). [`align_affine`] finds it from moments: with the covariances
 //! `Σ_t` of the similarity-aligned template and `Σ_i` of the foreground,
 //! `A = Σ_i^{1/2} Σ_t^{-1/2}` (the symmetric map that carries one covariance onto the other;
 //! the similarity has already fixed the rotation), `t = c_i − A c_t`, kept only when it raises
@@ -94,6 +99,17 @@ pub struct Alignment {
     pub voxel_dice_before: f64,
     /// Voxel Dice after.
     pub voxel_dice: f64,
+    /// How much thicker the foreground is than the moved template, `V_img / (s³ V_tmpl)`
+    /// (about the ratio of wall thicknesses for a sheet; 1 for an affine map, which matches
+    /// volumes by its moments).
+    pub thickness_ratio: f64,
+}
+
+impl Alignment {
+    /// The mean scale of the linear part of `m`, `det(A)^{1/3}`.
+    pub fn scale_of(m: &Matrix4<f64>) -> f64 {
+        m.fixed_view::<3, 3>(0, 0).determinant().cbrt()
+    }
 }
 
 /// The moments of `mask`'s foreground and of `boundary`'s interior (rasterized at the image's
@@ -131,7 +147,10 @@ fn candidate(
 /// foreground of the binary `mask` (see the module doc).
 pub fn align_similarity(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> {
     let (image, template, voxel_dice_before) = moments_and_dice(boundary, mask)?;
-    let scale = (image.volume / template.volume).cbrt();
+    let scale = (image.covariance.trace() / template.covariance.trace()).sqrt();
+    if !(scale.is_finite() && scale > 0.0) {
+        return Err(AlignmentFailure::Scale { scale }.into());
+    }
     let (e_img, e_tmpl) = (image.frame(), template.frame());
     let signs = [
         [1.0, 1.0, 1.0],
@@ -153,11 +172,13 @@ pub fn align_similarity(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> 
         }
     }
     let (matrix, voxel_dice) = best;
+    let scale = matrix.fixed_view::<3, 3>(0, 0).determinant().cbrt();
     Ok(Alignment {
         matrix,
-        scale: matrix.fixed_view::<3, 3>(0, 0).determinant().cbrt(),
+        scale,
         voxel_dice_before,
         voxel_dice,
+        thickness_ratio: image.volume / (scale.powi(3) * template.volume),
     })
 }
 
@@ -205,6 +226,7 @@ pub fn align_affine(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> {
         scale: 1.0,
         voxel_dice_before,
         voxel_dice: voxel_dice_before,
+        thickness_ratio: image.volume / template.volume,
     };
     let (Some(root_image), Some(inverse_root_template)) = (
         symmetric_power(&image.covariance, 0.5),
@@ -217,11 +239,13 @@ pub fn align_affine(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> {
     if dice <= voxel_dice_before {
         return Ok(identity);
     }
+    let scale = linear.determinant().cbrt();
     Ok(Alignment {
         matrix,
-        scale: linear.determinant().cbrt(),
+        scale,
         voxel_dice_before,
         voxel_dice: dice,
+        thickness_ratio: image.volume / (scale.powi(3) * template.volume),
     })
 }
 
@@ -336,6 +360,26 @@ mod tests {
             .map(|p| centre + p.component_mul(&stretch))
             .collect();
         TriMesh::new(points, triangles).unwrap()
+    }
+
+    /// A flat octahedron of semi-axes 10, 6 and `thickness`, as a mesh.
+    fn slab(thickness: f64) -> TriMesh {
+        let (points, triangles) = octahedron();
+        let stretch = Vec3::new(10.0, 6.0, thickness);
+        let points = points.iter().map(|p| p.component_mul(&stretch)).collect();
+        TriMesh::new(points, triangles).unwrap()
+    }
+
+    /// A wall twice as thick at the same extent is not a larger shape: the similarity keeps
+    /// the size (the volume ratio would scale by 2^{1/3} = 1.26) and reports the thickness.
+    #[test]
+    fn a_thicker_wall_is_not_a_larger_shape() {
+        let target = slab(2.0);
+        let (dims, grid) = grid_around(&target, 0.1, 1.0).unwrap();
+        let mask = rasterize(&target, dims, grid).unwrap();
+        let a = align_similarity(&slab(1.0), &mask).unwrap();
+        assert!((a.scale - 1.0).abs() < 0.03, "{a:?}");
+        assert!((a.thickness_ratio - 2.0).abs() < 0.15, "{a:?}");
     }
 
     #[test]

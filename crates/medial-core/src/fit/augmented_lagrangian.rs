@@ -1,4 +1,4 @@
-//! The augmented-Lagrangian schedule of one stage (SPEC §3).
+//! The augmented-Lagrangian schedule of one stage (docs/method.md §5.2).
 //!
 //! `λ = 0`, `μ = μ₀`; for each AL iteration: minimise `E_AL` over all momenta (L-BFGS, warm
 //! started), then `λ^n_l ← λ^n_l − μ C_l(q^n)` at the optimum, then `μ ← μ·μ_factor` (always,
@@ -50,6 +50,22 @@ pub struct AlSchedule {
     pub settle: Option<Settle>,
     /// Coarse to fine in time (none: every AL iteration in the stage's `N` steps).
     pub coarse: Option<CoarseTime>,
+    /// AL iterations past [`AlSchedule::iterations`] while the constraints are above a level
+    /// and still improving (none: the schedule's iterations only).
+    pub extend: Option<Extend>,
+}
+
+/// More AL iterations for a stage whose constraints end above a level: after the schedule's
+/// last AL iteration, one more (μ growing as before) while `max |C| > above` and the AL
+/// iteration just ended at least halved `max |C|`, at most `at_most` more. A schedule whose
+/// budget ran out while the constraints still converge goes on; one that stalls ends, and is
+/// reported as not meeting its tolerance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Extend {
+    /// The `max |C|` above which the schedule goes on, in the constraints' unit.
+    pub above: f64,
+    /// Most AL iterations added.
+    pub at_most: usize,
 }
 
 /// Coarse to fine in time: the first [`CoarseTime::al_iterations`] AL iterations (fewer if
@@ -101,6 +117,7 @@ impl Default for AlSchedule {
             first_iterations: None,
             settle: None,
             coarse: None,
+            extend: None,
         }
     }
 }
@@ -450,6 +467,7 @@ impl Schedule {
                 && p.fine_steps == stage.flow.time_steps()
         });
         if c.lambda.len() != lambda_len || c.al_iteration >= iterations || !coarse_fits {
+            // `iterations` counts the extension's too: its last can be in progress.
             return Err(Error::InvalidParameter(format!(
                 "the checkpoint does not fit the stage: AL iteration {} of {iterations}, {} \
                  multipliers for {lambda_len}, in {steps} time steps",
@@ -519,7 +537,8 @@ pub fn run_stage(
     let (al_iterations, coarse) = match stage.constraints {
         Some(_) => {
             schedule.check()?;
-            (schedule.iterations, schedule.coarse_flow(stage.flow)?)
+            let extra = schedule.extend.map_or(0, |e| e.at_most);
+            (schedule.iterations + extra, schedule.coarse_flow(stage.flow)?)
         }
         None => (1, None),
     };
@@ -601,9 +620,19 @@ pub fn run_stage(
             && (schedule.settle).is_some_and(|s| s.holds(&outcome.evaluation, at.previous_data));
         at.previous_data = outcome.evaluation.data;
         let coarse_settled = at.coarse.is_some() && outcome.settled;
+        let violation = outcome.evaluation.max_abs_constraint;
+        let scheduled = match stage.constraints {
+            Some(_) => schedule.iterations,
+            None => 1,
+        };
+        let extended = al_iteration + 1 >= scheduled
+            && al_iteration + 1 < al_iterations
+            && schedule.extend.is_some_and(|e| {
+                violation > e.above && violation <= 0.5 * at.previous_violation
+            });
         if outcome.unsound.is_some()
             || (outcome.settled && !coarse_settled)
-            || al_iteration + 1 == al_iterations
+            || (al_iteration + 1 >= scheduled && !extended)
         {
             at.outcome.momenta = min.momenta;
             if let Some(phase) = &at.coarse {
@@ -619,7 +648,6 @@ pub fn run_stage(
             .iter_mut()
             .zip(&values)
             .for_each(|(lam, c)| *lam -= mu * c);
-        let violation = at.outcome.evaluation.max_abs_constraint;
         let grow = match schedule.mu_update {
             MuUpdate::Always => true,
             MuUpdate::IfNotHalved => violation > 0.5 * at.previous_violation,

@@ -26,7 +26,7 @@
 //! assert_eq!(aligned.template.landmark_count(), case.template().landmark_count());
 //! ```
 
-use crate::build::project::{project, ConstraintFigures, ProjectOptions};
+use crate::construction::project::{project, ConstraintFigures, ProjectOptions};
 use crate::fit::align::{
     affine_between, align_affine, align_similarity, anisotropy, explained_spread,
     similarity_between,
@@ -46,6 +46,14 @@ use nalgebra::Matrix4;
 /// projection's own tolerance can tell.
 pub const AFFINE_ANISOTROPY: f64 = 0.01;
 
+/// The largest landmark move of the projection that follows an affine map, as a fraction of the
+/// template's mean spoke length (its half thickness): an affine map is taken only where the
+/// projection follows it with small moves. A move of a quarter of the spoke reshapes the
+/// boundary–medial prisms by as much, and an anisotropic map that needs it is mostly fitting
+/// the wall's thickness (which the flow follows, thickening the wall along its normals) rather
+/// than the shape's extent (which the similarity has matched).
+pub const MAX_PROJECTION_MOVE: f64 = 0.25;
+
 /// The least fraction of the target points' spread ([`explained_spread`]) that the
 /// least-squares similarity must account for: below it the points are taken not to correspond
 /// to the template boundary's, one for one.
@@ -61,6 +69,9 @@ pub struct InitialAlignment {
     /// One line per step, with its figures (scale, anisotropy, overlap or distance before and
     /// after).
     pub notes: Vec<String>,
+    /// Against an image: how much thicker the foreground is than the template carried by the
+    /// similarity ([`crate::fit::align::Alignment::thickness_ratio`]).
+    pub thickness_ratio: Option<f64>,
 }
 
 impl InitialAlignment {
@@ -69,6 +80,7 @@ impl InitialAlignment {
             matrix,
             similarity: matrix,
             notes,
+            thickness_ratio: None,
         }
     }
 
@@ -95,13 +107,17 @@ pub fn initial_alignment(
 fn align_to_image(boundary: &TriMesh, mask: &Volume) -> Result<InitialAlignment> {
     let s = align_similarity(boundary, mask)?;
     let mut notes = vec![format!(
-        "initial similarity: scale {:.4}, voxel Dice {:.3} → {:.3}",
-        s.scale, s.voxel_dice_before, s.voxel_dice
+        "initial similarity: scale {:.4}, voxel Dice {:.3} → {:.3}, the foreground {:.2}× as \
+         thick as the moved template",
+        s.scale, s.voxel_dice_before, s.voxel_dice, s.thickness_ratio
     )];
     let carried = boundary.carried(&s.matrix);
     let a = align_affine(&carried, mask)?;
     if anisotropy(&a.matrix) <= AFFINE_ANISOTROPY {
-        return Ok(InitialAlignment::similarity(s.matrix, notes));
+        return Ok(InitialAlignment {
+            thickness_ratio: Some(s.thickness_ratio),
+            ..InitialAlignment::similarity(s.matrix, notes)
+        });
     }
     notes.push(format!(
         "initial affine: anisotropy {:.1} %, voxel Dice {:.3} → {:.3}",
@@ -113,6 +129,7 @@ fn align_to_image(boundary: &TriMesh, mask: &Volume) -> Result<InitialAlignment>
         matrix: a.matrix * s.matrix,
         similarity: s.matrix,
         notes,
+        thickness_ratio: Some(s.thickness_ratio),
     })
 }
 
@@ -164,6 +181,7 @@ fn align_to_points(boundary: &TriMesh, q: &[Vec3]) -> Result<InitialAlignment> {
         matrix: affine,
         similarity,
         notes,
+        thickness_ratio: None,
     })
 }
 
@@ -219,7 +237,22 @@ pub fn align_template(
         } else {
             "as given"
         };
+        let spoke = mean_spoke(template) * crate::fit::align::Alignment::scale_of(&matrix);
         match project(&carried, &options) {
+            Ok(projection) if affine && projection.max_displacement > MAX_PROJECTION_MOVE * spoke => {
+                notes.push(format!(
+                    "the initial affine map (anisotropy {:.1} %) needs the projection to move \
+                     landmarks by up to {:.3} mm, more than {MAX_PROJECTION_MOVE} of the mean \
+                     spoke ({spoke:.3} mm): the similarity alone is taken",
+                    100.0 * anisotropy(&matrix),
+                    projection.max_displacement
+                ));
+                matrix = alignment.similarity;
+                let similar = InitialAlignment::similarity(matrix, Vec::new());
+                let aligned = align_template(template, &similar)?;
+                notes.extend(aligned.notes);
+                carried = aligned.template;
+            }
             Ok(projection) => {
                 notes.push(format!(
                     "template projected onto its constraints {why}: {:.3}° / {:.3} % → {:.3}° / \
@@ -255,4 +288,45 @@ pub fn align_template(
         matrix,
         notes,
     })
+}
+
+/// The wall-thickness ratio past which a thickened template is tried as a start (either way):
+/// below it the flow follows the wall with moves well within a spoke.
+pub const THICKEN_AT_LEAST: f64 = 1.15;
+
+/// `template` with every spoke scaled by `factor` about its medial point, projected back onto
+/// the constraints: the wall made `factor` times as thick at the same medial sheet. None where
+/// the thickened boundary intersects itself or its projection fails (too thick for the sheet's
+/// curvature).
+pub fn thickened(template: &MedialTemplate, factor: f64) -> Option<MedialTemplate> {
+    let q = template.landmarks();
+    let atoms = template.medial_index();
+    let moved: Vec<Vec3> = (0..q.len())
+        .map(|i| {
+            if i < template.boundary_count() {
+                let m = q[template.atom_landmark(atoms[i])];
+                m + factor * (q[i] - m)
+            } else {
+                q[i]
+            }
+        })
+        .collect();
+    let carried = template.with_landmarks(&moved).ok()?;
+    let projected = project(&carried, &ProjectOptions::default()).ok()?.template;
+    let boundary = projected.boundary_mesh().ok()?;
+    let sound = crate::construction::inflate::self_intersections(&boundary).is_empty()
+        && check_closed_oriented_manifold(&boundary).is_ok()
+        && check_outward(&boundary).is_ok();
+    sound.then_some(projected)
+}
+
+/// Mean spoke length `|q_b − q_M[b]|` over the boundary points of `template`, mm.
+fn mean_spoke(template: &MedialTemplate) -> f64 {
+    let q = template.landmarks();
+    let atoms = template.medial_index();
+    let n = template.boundary_count();
+    (0..n)
+        .map(|b| (q[b] - q[template.atom_landmark(atoms[b])]).norm())
+        .sum::<f64>()
+        / n.max(1) as f64
 }

@@ -23,7 +23,7 @@ pub use align::{
     similarity_between, Alignment, AlignmentFailure,
 };
 pub use augmented_lagrangian::{
-    run_stage, AlSchedule, CoarseTime, MuUpdate, Progress, Stage, StageCheckpoint, StageOutcome,
+    run_stage, AlSchedule, CoarseTime, Extend, MuUpdate, Progress, Stage, StageCheckpoint, StageOutcome,
     StageRun, StageStart, UnsoundStop,
 };
 pub use guard::{Guard, Unsound};

@@ -1,4 +1,4 @@
-//! The objective of one stage (SPEC §3):
+//! The objective of one stage (docs/method.md §3.5):
 //! `E_AL = w_kin·KE + w_data·g(q^N) + Σ_{n=1..N} Σ_l [ (μ/2) C_l(q^n)² − λ^n_l C_l(q^n) ]`,
 //! its exact gradient with respect to every momentum `u^n` (one forward and one fused backward
 //! pass), and the figures reported for it.

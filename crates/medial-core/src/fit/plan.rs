@@ -22,7 +22,7 @@
 
 use crate::attachment::varifold::default_width;
 use crate::fit::augmented_lagrangian::CoarseTime;
-use crate::fit::augmented_lagrangian::Settle;
+use crate::fit::augmented_lagrangian::{Extend, Settle};
 use crate::fit::optimize::ProgressRule;
 use crate::fit::prepare::Target;
 use crate::fit::spec::{AttachmentSpec, DiceSpec, FitSpec, FlowSettings, StageSpec, VarifoldSpec};
@@ -292,6 +292,15 @@ fn finest_width(fine: f64, sigma: f64) -> f64 {
 /// fit.
 const SETTLE_CONSTRAINT: f64 = 1e-3;
 
+/// A constrained automatic stage that ends its schedule with `max |C|` above this (relative
+/// units: about 0.3° and 0.5 %, half the tolerance of a fit) goes on for up to
+/// [`EXTEND_AT_MOST`] more AL iterations while each at least halves it ([`Extend`]): the budget
+/// is there to finish the job, not to end it; a schedule that stalls ends.
+const EXTEND_ABOVE: f64 = 5e-3;
+
+/// Most AL iterations an automatic stage adds ([`EXTEND_ABOVE`]).
+const EXTEND_AT_MOST: usize = 4;
+
 /// The attachment's relative change over an AL iteration at most which it has settled.
 const SETTLE_DATA_CHANGE: f64 = 1e-3;
 
@@ -302,6 +311,10 @@ fn constrained(name: &str, attachment: AttachmentSpec, schedule: Schedule) -> St
     stage.schedule.settle = Some(Settle {
         max_abs_constraint: SETTLE_CONSTRAINT,
         data_change: SETTLE_DATA_CHANGE,
+    });
+    stage.schedule.extend = Some(Extend {
+        above: EXTEND_ABOVE,
+        at_most: EXTEND_AT_MOST,
     });
     stage.schedule.mu = schedule.mu;
     stage.schedule.mu_factor = 10.0;

@@ -18,7 +18,11 @@
 
 use crate::fit::augmented_lagrangian::{Stage, StageOutcome};
 use crate::fit::guard::Guard;
-use crate::fit::initial::{align_template, initial_alignment, InitialAlignment};
+use crate::fit::initial::{
+    align_template, initial_alignment, thickened, InitialAlignment, THICKEN_AT_LEAST,
+};
+use crate::image::rasterize::voxel_dice;
+use crate::model::MedialTemplate;
 use crate::fit::objective::ConstraintSet;
 use crate::fit::plan::{self, Geometry};
 use crate::fit::prepare::{PreparedStage, Target};
@@ -134,6 +138,50 @@ impl Fit {
     }
 }
 
+/// The start of a fit of the aligned template `aligned` to the foreground `mask` that is
+/// `ratio` times as thick (by volume, after the similarity): where the ratio passes
+/// [`THICKEN_AT_LEAST`] (or its inverse), the template with its spokes scaled by the ratio
+/// ([`thickened`]) when that overlaps the foreground better; the wall's thickness is then its
+/// own factor of the alignment rather than a long way for the flow to go along the normals,
+/// where thin prisms fold.
+fn thicker_start(
+    aligned: MedialTemplate,
+    ratio: f64,
+    mask: &crate::image::Volume,
+    notes: &mut Vec<String>,
+) -> Result<MedialTemplate> {
+    if !(ratio.is_finite() && (ratio >= THICKEN_AT_LEAST || ratio <= 1.0 / THICKEN_AT_LEAST)) {
+        return Ok(aligned);
+    }
+    // The whole ratio first, then less of it (ratio^{3/4}, ^{1/2}, ^{1/4}) where the whole one
+    // is too thick for the sheet's curvature.
+    let Some((factor, thick)) = [1.0, 0.75, 0.5, 0.25]
+        .iter()
+        .map(|power| ratio.powf(*power))
+        .find_map(|factor| thickened(&aligned, factor).map(|t| (factor, t)))
+    else {
+        notes.push(format!(
+            "the wall {ratio:.2}× as thick as the template: no thickened template (up to that \
+             factor) is sound; the flow thickens it"
+        ));
+        return Ok(aligned);
+    };
+    let before = voxel_dice(&aligned.boundary_mesh()?, mask)?;
+    let after = voxel_dice(&thick.boundary_mesh()?, mask)?;
+    if after <= before {
+        notes.push(format!(
+            "the wall {ratio:.2}× as thick as the template: the template thickened {factor:.2}× \
+             overlaps less (voxel Dice {before:.3} → {after:.3}); the flow thickens it"
+        ));
+        return Ok(aligned);
+    }
+    notes.push(format!(
+        "the wall {ratio:.2}× as thick as the template: spokes scaled by {factor:.2} and \
+         projected, voxel Dice {before:.3} → {after:.3}"
+    ));
+    Ok(thick)
+}
+
 /// Where an automatic fit starts: its plan, and the template carried by the initial alignment.
 pub struct AutomaticStart {
     /// The fit's settings ([`plan::automatic`]).
@@ -173,7 +221,14 @@ pub fn automatic(model: &Model, target: &Target) -> Result<AutomaticStart> {
             let mut alignment = alignment;
             alignment.notes.extend(aligned.notes);
             alignment.matrix = aligned.matrix;
-            (alignment, Model::Medial(Box::new(aligned.template)))
+            let start = match (target, alignment.thickness_ratio) {
+                (Target::Image { volume, label }, Some(ratio)) => {
+                    let mask = volume.foreground(*label);
+                    thicker_start(aligned.template, ratio, &mask, &mut alignment.notes)?
+                }
+                _ => aligned.template,
+            };
+            (alignment, Model::Medial(Box::new(start)))
         }
         Model::Plain(mesh) => {
             let axes = PrincipalAxes::of(mesh.points())?;

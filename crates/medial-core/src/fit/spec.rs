@@ -202,6 +202,7 @@ impl StageSpec {
                 first_iterations: None,
                 settle: None,
                 coarse: None,
+                extend: None,
             },
             lbfgs: LbfgsOptions {
                 max_iterations: 1000,
@@ -268,6 +269,9 @@ impl StageSpec {
         if let Some(settle) = s.settle {
             non_negative("settle_constraint", settle.max_abs_constraint)?;
             non_negative("settle_data_change", settle.data_change)?;
+        }
+        if let Some(e) = s.extend {
+            positive("extend_above", e.above)?;
         }
         if let Some(p) = self.lbfgs.progress {
             non_negative("progress_decrease", p.decrease)?;

@@ -1,4 +1,4 @@
-//! The landmark flow (forward Euler) and its exact discrete adjoint (SPEC §3).
+//! The landmark flow (forward Euler) and its exact discrete adjoint (docs/method.md §3.3–§3.5).
 //!
 //! Momenta `u^n ∈ R^{k×3}`, `n = 0 … N−1`, are stored flat as `u[(n·k + i)·3 + c]`.
 //!

@@ -1,5 +1,5 @@
 //! Topology of boundary meshes: closed, manifold, consistently and outwardly oriented surfaces,
-//! and the one-ring of every vertex in the order the Loop tangents need (SPEC §4).
+//! and the one-ring of every vertex in the order the Loop tangents need (docs/method.md §2.4).
 //!
 //! Conventions: a triangle `[a, b, c]` is counter-clockwise about its outward normal
 //! `(p_b − p_a) × (p_c − p_a)`. In a consistently oriented closed surface every edge is used by
@@ -284,7 +284,7 @@ pub fn signed_volume(points: &[Vec3], triangles: &[[usize; 3]]) -> f64 {
 /// The one-ring of every vertex of a closed, consistently oriented manifold: the neighbours
 /// `v_0 … v_{n−1}` walked counter-clockwise about the outward normal (the orientation of the
 /// triangles: in triangle `[v, a, b]`, `b` follows `a`), starting at the neighbour with the
-/// smallest index (SPEC §4).
+/// smallest index (docs/method.md §2.4).
 ///
 /// Defects name the vertex: an index out of range, a repeated corner ([`check_corners`]), a
 /// point used by no triangle, a vertex on a border (open mesh), a non-manifold or

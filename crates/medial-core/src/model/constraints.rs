@@ -1,4 +1,4 @@
-//! The medial constraints `C(q) ∈ R^L` of a template (SPEC §3), their exact values, Jacobian
+//! The medial constraints `C(q) ∈ R^L` of a template (docs/method.md §4.1–§4.2), their exact values, Jacobian
 //! and weighted gradients.
 //!
 //! Landmarks `q` have `k = nb + nm` entries (boundary points, then medial points; atom `m` is
@@ -14,7 +14,7 @@
 //! (`W^γ_{bb} = 0` on a closed mesh); for equal spokes `d_j = q_{b_j} − q_m`:
 //! `∂C/∂q_{b_j} = 2 d_j`, `∂C/∂q_{b_0} = −2 d_0`, `∂C/∂q_m = 2 (d_0 − d_j)`.
 //!
-//! **Units** ([`ConstraintUnits`]). As SPEC §3 writes them the constraints are in mm², so a
+//! **Units** ([`ConstraintUnits`]). As docs/method.md §4.1–§4.2 writes them the constraints are in mm², so a
 //! given violation means a larger angle or mismatch on a short spoke than on a long one, and μ
 //! depends on the size of the template. [`ConstraintUnits::Relative`] divides every constraint
 //! by a constant of the template `q⁰`: orthogonality by `|s⁰_b| |t⁰_γ|`, so that it reads

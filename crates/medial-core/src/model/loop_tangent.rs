@@ -1,4 +1,4 @@
-//! Loop tangent operators of a closed boundary mesh (SPEC §4).
+//! Loop tangent operators of a closed boundary mesh (docs/method.md §2.4).
 //!
 //! For a vertex `b` of valence `n` with one-ring `v_0 … v_{n−1}` walked counter-clockwise about
 //! the outward normal from its smallest neighbour ([`crate::mesh::topology::vertex_rings`]):

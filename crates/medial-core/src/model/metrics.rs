@@ -1,8 +1,8 @@
-//! How well a landmark configuration satisfies the medial conditions (SPEC §6): spoke–normal
+//! How well a landmark configuration satisfies the medial conditions (docs/method.md §4.4): spoke–normal
 //! deviation, spoke-length mismatch, and thickness.
 //!
 //! A spoke is `s_b = q_b − q_m` (`m = M[b]`), the boundary normal `n̂_b` is the Loop normal
-//! `normalize(W¹q × W²q)_b` (SPEC §4). Degenerate geometry is reported, never hidden: a zero
+//! `normalize(W¹q × W²q)_b` (docs/method.md §2.4). Degenerate geometry is reported, never hidden: a zero
 //! spoke or a degenerate normal gives a NaN angle, an atom of zero mean spoke length a NaN
 //! mismatch, and the maxima and means are NaN whenever one of their terms is.
 

@@ -1,4 +1,4 @@
-//! The medial template (SPEC §2): a closed, outward-oriented boundary mesh whose every point `b`
+//! The medial template (docs/method.md §2.1–§2.2): a closed, outward-oriented boundary mesh whose every point `b`
 //! is the end of a spoke of medial atom `M[b]`, and the medial points of the atoms.
 //!
 //! Landmarks `q` (`k = nb + nm` points): the `nb` boundary points first, then the `nm` medial
@@ -134,7 +134,7 @@ impl MedialTemplate {
 
     /// The medial triangles: the distinct triples of distinct atoms `{M[a], M[b], M[c]}` over
     /// boundary triangles `[a, b, c]`, in order of first appearance, each oriented as the
-    /// boundary triangle it first came from (SPEC §2).
+    /// boundary triangle it first came from (docs/method.md §2.1–§2.2).
     pub fn medial_triangles(&self) -> &[[usize; 3]] {
         &self.medial_triangles
     }

@@ -1,8 +1,8 @@
 //! A synthetic case built as a template would be from a real sheet, and its targets.
 
 use super::{Shape, Warp};
-use crate::build::inflate::{inflate, MedialSheet};
-use crate::build::project::{project, ProjectOptions, Projection};
+use crate::construction::inflate::{inflate, MedialSheet};
+use crate::construction::project::{project, ProjectOptions, Projection};
 use crate::image::rasterize::{grid_around, rasterize};
 use crate::image::volume::Volume;
 use crate::mesh::subdivide::midpoint_subdivide;

@@ -15,7 +15,7 @@
 //!
 //! A case is built as a template would be from a real sheet: the coarse sheet is Loop
 //! subdivided once, inflated and projected onto the medial constraints
-//! ([`crate::build::project::project`]). The target is the template boundary, midpoint subdivided
+//! ([`crate::construction::project::project`]). The target is the template boundary, midpoint subdivided
 //! [`TARGET_SUBDIVISIONS`] times (so that the smooth warp bends its triangles), carried by the
 //! case's [`Warp`]: a twist and a bend about the shape's long axis (z) followed by an affine map.
 //!

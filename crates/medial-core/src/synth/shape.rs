@@ -2,7 +2,7 @@
 
 use super::sheets::{cup_sheet, toy_sheet};
 use super::Warp;
-use crate::build::inflate::MedialSheet;
+use crate::construction::inflate::MedialSheet;
 use crate::{Error, Result, Vec3};
 use nalgebra::{Matrix3, Rotation3, Unit};
 use std::f64::consts::PI;

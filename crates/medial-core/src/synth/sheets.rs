@@ -5,7 +5,7 @@ use super::shape::{
     CUP_EQUATOR, CUP_LENGTH, CUP_OPENING, CUP_RADIUS_APEX, CUP_RADIUS_BASE, CUP_RADIUS_SEPTUM,
     CUP_RINGS, TOY_CELLS, TOY_CURL, TOY_LENGTH, TOY_RADIUS, TOY_WIDTH,
 };
-use crate::build::inflate::MedialSheet;
+use crate::construction::inflate::MedialSheet;
 use crate::{Error, Result, Vec3};
 use std::f64::consts::{PI, TAU};
 
@@ -77,7 +77,7 @@ pub type ParameterGrid = (Vec<[f64; 2]>, Vec<[usize; 3]>);
 /// `(u, v) = (i/nu, j/nv)` in `[0, 1]²` (point `j(nu+1) + i`) and `2 nu nv` triangles, each
 /// cell split along the diagonal through its corner with even `i + j`, counter-clockwise in
 /// `(u, v)`. With `nu`, `nv` even no triangle has two edges on the border of the grid, as
-/// [`inflate`](crate::build::inflate()) requires. Mapping the parameters to points and radii
+/// [`inflate`](crate::construction::inflate()) requires. Mapping the parameters to points and radii
 /// gives a [`MedialSheet`] (the toy's sheets are three such grids sharing the column `u = 0`).
 ///
 /// Errors: `InvalidParameter` if `nu` or `nv` is 0.

@@ -1,6 +1,6 @@
 //! Dice attachment: the Dice similarity coefficient between the interior of the medial model
 //! and a (smoothed) binary image, and its exact gradient with respect to every landmark
-//! (SPEC §5).
+//! (docs/method.md §6.2).
 //!
 //! **Sampling** (`sampling`). The boundary mesh is subdivided `S` times (each new vertex the
 //! midpoint of its edge), so every subdivided boundary vertex is a fixed combination
@@ -20,19 +20,19 @@
 //! `O = Σ_P vol_P F_P`, `F_P = (1/3) Σ_{j∈P} f(y_j)`, `V_abs = Σ_P |vol_P|`,
 //! `DSC = 2 O / (V_abs + V_img)`, `V_img = ∫ f`.
 //!
-//! **Folds are not rewarded; a departure from SPEC §5.** SPEC §5 divides by the signed volume
+//! **Folds are not rewarded; a departure from docs/method.md §6.2.** docs/method.md §6.2 divides by the signed volume
 //! `V = Σ_P vol_P`. A prism turned inside out outside the foreground (a medial point pushed
 //! through the boundary, `F_P ≈ 0`) then lowers `V` and *raises* the Dice: the optimiser is paid
 //! to fold. With `V_abs = V − 2 Σ_P min(vol_P, 0)` each folded prism adds its volume to the
 //! denominator, so a fold lowers the Dice wherever it is; without folds `V_abs = V` and the
-//! value is SPEC §5's, bit for bit.
+//! value is docs/method.md §6.2's, bit for bit.
 //!
 //! **Gradient.** `∂DSC = 2 ∂O / (V_abs + V_img) − 2 O ∂V_abs / (V_abs + V_img)²`, with
 //! `∂O = Σ_P [F_P Σ_{c∈P} ∂vol_P/∂x_c + (vol_P/3) Σ_{j∈P} ∇f(y_j)]`,
 //! `∂V_abs = Σ_P sign(vol_P) Σ_{c∈P} ∂vol_P/∂x_c`, `∂vol/∂p = (q × r)/6` for each face
 //! `(p, q, r)`, and the linear maps from corners and samples back to landmarks.
 //!
-//! **Accuracy; a departure from SPEC §5.** SPEC §5 gives each prism's volume to its six
+//! **Accuracy; a departure from docs/method.md §6.2.** docs/method.md §6.2 gives each prism's volume to its six
 //! corners. That is a trapezoidal rule across the layers whose boundary samples sit on the
 //! image edge, where `f ≈ 1/2`: it biases the overlap low by about `1/(4·layers)` of the volume
 //! (measured: a model against its own rasterization scored 0.927 for a thick slab and 0.893 for

@@ -1,4 +1,4 @@
-//! Medial fidelity, the paper's claim itself (SPEC §6): is every medial point still the centre
+//! Medial fidelity, the paper's claim itself (docs/method.md §8): is every medial point still the centre
 //! of a ball inscribed in the boundary, of the radius its spokes say?
 //!
 //! For atom `m` with medial point `x_m` and spokes `s_b = q_b − x_m`:
@@ -231,7 +231,7 @@ fn nearest(mesh: &ParryMesh, x: &Vec3) -> (f64, bool) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::build::inflate::{inflate, MedialSheet};
+    use crate::construction::inflate::{inflate, MedialSheet};
     use crate::synth::parameter_grid;
     use approx::assert_relative_eq;
     use nalgebra::{Rotation3, Unit};

@@ -1,7 +1,7 @@
 //! Medial sheets from a shape: the medial points of a binary mask (the ridge of its exact
 //! distance map, [`ridge`]), a chart of the sheet they form ([`chart`]), and a regularly
 //! sampled triangulated sheet with a radius per vertex through them ([`disc`]) — the input
-//! [`inflate`](crate::build::inflate()) takes.
+//! [`inflate`](crate::construction::inflate()) takes.
 //!
 //! The method, step by step:
 //! 1. the exact Euclidean distance and feature transform of the mask
@@ -39,7 +39,7 @@ pub mod ridge;
 pub mod seam;
 pub mod stitch;
 
-use crate::build::inflate::MedialSheet;
+use crate::construction::inflate::MedialSheet;
 use crate::image::Volume;
 use crate::{Error, Result, Vec3};
 use branching::{branching, Branches, Branching};

@@ -9,7 +9,7 @@
 //!    shape and its constraints hold to the projection's tolerance.
 //!
 //! ```no_run
-//! use medial_core::build::from_shape::{template_of_shape, Shape, TemplateOptions};
+//! use medial_core::construction::from_shape::{template_of_shape, Shape, TemplateOptions};
 //! use medial_core::memory::MemoryLimit;
 //! # fn segmentation() -> medial_core::image::Volume { unimplemented!() }
 //! let shape = Shape::of_segmentation(&segmentation(), None);
@@ -17,10 +17,10 @@
 //! assert!(built.figures.verdict().is_ok());
 //! ```
 
-use crate::build::inflate::{inflate, self_intersections, MedialSheet};
-use crate::build::project::{project, ProjectOptions};
-use crate::build::skeleton::chart::ChartKind;
-use crate::build::skeleton::{medial_points, sheet_of_mask, Sampling, ShapeSheet, MIN_FEATURE_ANGLE_DEG};
+use crate::construction::inflate::{inflate, self_intersections, MedialSheet};
+use crate::construction::project::{project, ProjectOptions};
+use crate::construction::skeleton::chart::ChartKind;
+use crate::construction::skeleton::{medial_points, sheet_of_mask, Sampling, ShapeSheet, MIN_FEATURE_ANGLE_DEG};
 use crate::fit::run::automatic;
 use crate::fit::Target;
 use crate::image::rasterize::{grid_around, grid_around_bounds, rasterize, voxel_dice};

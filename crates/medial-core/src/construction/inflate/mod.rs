@@ -1,4 +1,4 @@
-//! Templates from a medial sheet: Loop subdivision of the sheet and inflation (SPEC §9).
+//! Templates from a medial sheet: Loop subdivision of the sheet and inflation (docs/method.md §9.1).
 //!
 //! A *medial sheet* is a triangle mesh of medial points `x_m` (mm) with a radius `r_m > 0` (mm)
 //! per vertex. It may be non-manifold: an edge in one triangle is a *free edge*, in two an

@@ -1,6 +1,6 @@
 //! Projection of a template onto its medial constraints: the smallest move of the landmarks
 //! after which the spokes are normal to the boundary and the spokes of every atom are equally
-//! long (SPEC §3, §9).
+//! long (docs/method.md §9.2, §9).
 //!
 //! With `q⁰` the given landmarks (boundary and medial points alike, in mm) the projection
 //! solves

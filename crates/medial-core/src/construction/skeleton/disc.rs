@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use super::chart::Chart;
 use super::lattice::Lattice;
 use super::ridge::MedialPoint;
-use crate::build::inflate::MedialSheet;
+use crate::construction::inflate::MedialSheet;
 use crate::{Error, Result, Vec3};
 
 /// Fewest points a vertex's window must hold for a linear fit.

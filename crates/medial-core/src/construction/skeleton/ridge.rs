@@ -4,7 +4,7 @@
 use rayon::prelude::*;
 use std::collections::HashMap;
 
-use crate::build::inflate::UnionFind;
+use crate::construction::inflate::UnionFind;
 use crate::image::distance::{FeatureTransform, NO_FEATURE};
 use crate::image::Volume;
 use crate::{Error, Result, Vec3};

@@ -1,12 +1,12 @@
 //! Sheets built separately, stitched along the seams where they meet: the part of each sheet
 //! that reaches over a seam is cut off, and the band between the cut and the seam's polyline
 //! is triangulated, so that every seam edge is in exactly three triangles (one per sheet), the
-//! non-manifold sheet [`inflate`](crate::build::inflate()) takes.
+//! non-manifold sheet [`inflate`](crate::construction::inflate()) takes.
 
 use std::collections::{HashMap, HashSet};
 
 use super::seam::Seam;
-use crate::build::inflate::MedialSheet;
+use crate::construction::inflate::MedialSheet;
 use crate::{Error, Result, Vec3};
 
 /// A sheet's vertices within this many lattice spacings of a seam are cut off: the sheet's own
@@ -278,7 +278,7 @@ fn longest_run(loop_: &[usize], on: impl Fn(usize) -> bool) -> Option<Vec<usize>
 mod tests {
     use super::super::lattice::Lattice;
     use super::*;
-    use crate::build::inflate::inflate;
+    use crate::construction::inflate::inflate;
     use std::collections::BTreeMap;
 
     /// Three fins at 120° about the z axis, each a lattice sheet of spacing 1 and `rings` rings
@@ -383,7 +383,7 @@ mod tests {
         );
         // The pieces joined across edges of two triangles are the three sheets; within each an
         // edge runs at most once each way (orientation consistent).
-        let mut pieces = crate::build::inflate::UnionFind::new(triangles.len());
+        let mut pieces = crate::construction::inflate::UnionFind::new(triangles.len());
         let mut by_edge: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
         for (i, t) in triangles.iter().enumerate() {
             for k in 0..3 {

@@ -7,7 +7,7 @@ use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
 
 use super::ridge::MedialPoint;
-use crate::build::inflate::UnionFind;
+use crate::construction::inflate::UnionFind;
 use crate::Vec3;
 
 /// Radius of the ball about a medial point whose points decide whether it is on a seam, voxels.
