@@ -30,9 +30,11 @@ pub struct LogRow<'a> {
     pub time_steps: usize,
 }
 
-/// `log.csv`, written to `log.csv.part` in the result folder as the fit goes (flushed row by
-/// row, for `tail -f`) and moved into the set of results when the fit ends
-/// ([`Log::finish`]); removed if the fit fails before. It keeps its text for checkpoints.
+/// `log.csv`, written to `.medial-<pid>-log.csv.part` in the result folder as the fit goes
+/// (flushed row by row, for `tail -f`) and moved into the set of results when the fit ends
+/// ([`Log::finish`]); removed if the fit fails before. The name is a temporary name of the tool
+/// ([`medial_io::atomic::temp_owner`]): a later run removes it when this one was killed, and
+/// never a user's `*.part` file. It keeps its text for checkpoints.
 pub struct Log {
     out: BufWriter<std::fs::File>,
     part: PathBuf,
@@ -43,11 +45,16 @@ pub struct Log {
 const LOG_HEADER: &str = "stage,al_iteration,iteration,evaluations,mu,total,kinetic,data,penalty,max_abs_constraint,max_spoke_normal_deg,max_spoke_mismatch_pct,grad_norm,seconds,dice,time_steps";
 
 impl Log {
-    /// Starts `path` (as `path.part`) with `earlier`, the log of a checkpoint up to it, or
-    /// with the header when `earlier` is empty.
+    /// Starts `path` (as [`part_name`] beside it) with `earlier`, the log of a checkpoint up
+    /// to it, or with the header when `earlier` is empty.
     pub fn create(path: &Path, earlier: &str) -> Result<Self, CliError> {
-        let part = path.with_extension("csv.part");
-        let file = std::fs::File::create(&part).map_err(|e| CliError::io(&part, e))?;
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
+        let part = path.with_file_name(part_name(&name.unwrap_or_default()));
+        let file = std::fs::File::options()
+            .write(true)
+            .create_new(true)
+            .open(&part)
+            .map_err(|e| CliError::io(&part, e))?;
         let mut log = Self {
             out: BufWriter::new(file),
             part,
@@ -120,6 +127,11 @@ impl Drop for Log {
             let _ = std::fs::remove_file(&self.part);
         }
     }
+}
+
+/// The name of the unfinished file `name` of this process: `.medial-<pid>-<name>.part`.
+pub fn part_name(name: &str) -> String {
+    format!("{}{name}.part", medial_io::atomic::temp_prefix())
 }
 
 /// Quotes a CSV field when it needs it.

@@ -97,24 +97,28 @@ impl ResultSet {
     ) -> Result<(), CliError> {
         let files = self.files();
         write_marker(&self.file(marker)?, files.clone())?;
+        let root = canonical(&self.dir)?;
+        // Every destination is checked before anything changes: a refusal leaves the earlier
+        // set as it was.
+        let destinations = files
+            .iter()
+            .chain(std::iter::once(&marker.to_string()))
+            .map(|relative| Ok((relative.clone(), destination(&root, &self.dir, relative)?)))
+            .collect::<Result<Vec<_>, CliError>>()?;
         let earlier = listed_files(&self.dir.join(marker));
-        remove_if_present(&self.dir.join(marker))?;
-        for relative in &files {
-            let to = self.dir.join(relative);
-            if let Some(parent) = to.parent() {
-                create_dir(parent)?;
-            }
+        remove_own(&root, &self.dir, marker)?;
+        for (relative, to) in &destinations[..files.len()] {
             let from = self.staging.join(relative);
-            std::fs::rename(&from, &to).map_err(|e| CliError::io(&to, e))?;
+            std::fs::rename(&from, to).map_err(|e| CliError::io(to, e))?;
         }
         let kept: BTreeSet<&String> = files.iter().collect();
         for stale in earlier.iter().chain(&self.retired) {
-            if !kept.contains(stale) && is_relative_inside(stale) {
-                remove_if_present(&self.dir.join(stale))?;
+            if !kept.contains(stale) {
+                remove_own(&root, &self.dir, stale)?;
             }
         }
-        let to = self.dir.join(marker);
-        std::fs::rename(self.staging.join(marker), &to).map_err(|e| CliError::io(&to, e))?;
+        let to = &destinations[files.len()].1;
+        std::fs::rename(self.staging.join(marker), to).map_err(|e| CliError::io(to, e))?;
         sync_dir(&self.dir);
         Ok(())
     }
@@ -129,28 +133,40 @@ impl Drop for ResultSet {
 }
 
 /// Removes from `dir` and its set sub-folders what interrupted runs leave: staging folders
-/// (`.medial-staging-*`), the temporary files of atomic writes (`.*.tmp`) and unfinished files
-/// (`*.part`). Refuses (`Busy`), before removing anything, when another running process owns a
-/// staging folder there: its unfinished files (its `log.csv.part`) are its own, and a folder
-/// lists them in no set order (removing as they came once deleted a running fit's log before
-/// its staging folder was reached).
+/// (`.medial-staging-<pid>`) and the temporary files of the tool (`.medial-<pid>-…`: those of
+/// atomic writes, [`medial_io::atomic::temp_owner`], and the unfinished `log.csv`,
+/// [`crate::progress::part_name`]) whose process no longer runs. Only regular files and
+/// folders of the folder itself are removed (a symbolic link is never followed), and no
+/// other name: a user's `*.part` or `.*.tmp` file stays. Refuses (`Busy`), before removing
+/// anything, when another running process owns a staging folder there: its unfinished files
+/// are its own.
 pub fn clean(dir: &Path) -> Result<(), CliError> {
-    let folders = std::iter::once(dir.to_path_buf()).chain(SUBFOLDERS.iter().map(|s| dir.join(s)));
-    let entries: Vec<(String, PathBuf, bool)> = folders
+    let folders = std::iter::once(dir.to_path_buf()).chain(
+        SUBFOLDERS
+            .iter()
+            .map(|s| dir.join(s))
+            .filter(|sub| std::fs::symlink_metadata(sub).is_ok_and(|m| m.is_dir())),
+    );
+    let entries: Vec<(String, PathBuf, std::fs::FileType)> = folders
         .filter_map(|folder| std::fs::read_dir(folder).ok())
         .flat_map(|entries| entries.flatten())
-        .map(|entry| {
-            let is_dir = entry.file_type().is_ok_and(|t| t.is_dir());
-            (
+        .filter_map(|entry| {
+            let kind = entry.file_type().ok()?;
+            Some((
                 entry.file_name().to_string_lossy().into_owned(),
                 entry.path(),
-                is_dir,
-            )
+                kind,
+            ))
         })
         .collect();
-    let staging = |name: &str, is_dir: bool| is_dir && name.starts_with(STAGING_PREFIX);
-    for (name, _, is_dir) in &entries {
-        if staging(name, *is_dir) {
+    let staging = |name: &str, kind: &std::fs::FileType| {
+        kind.is_dir()
+            && name
+                .strip_prefix(STAGING_PREFIX)
+                .is_some_and(|pid| pid.parse::<u32>().is_ok())
+    };
+    for (name, _, kind) in &entries {
+        if staging(name, kind) {
             if let Some(pid) = writer_running(&name[STAGING_PREFIX.len()..]) {
                 return Err(CliError::Busy {
                     dir: dir.into(),
@@ -159,11 +175,14 @@ pub fn clean(dir: &Path) -> Result<(), CliError> {
             }
         }
     }
-    for (name, path, is_dir) in &entries {
-        if staging(name, *is_dir) {
+    for (name, path, kind) in &entries {
+        if staging(name, kind) {
             std::fs::remove_dir_all(path).map_err(|e| CliError::io(path, e))?;
-        } else if !is_dir && is_leftover(name) {
-            remove_if_present(path)?;
+        } else if kind.is_file() {
+            let owner = medial_io::atomic::temp_owner(name);
+            if owner.is_some_and(|pid| writer_running(&pid.to_string()).is_none()) {
+                remove_if_present(path)?;
+            }
         }
     }
     Ok(())
@@ -178,10 +197,72 @@ fn writer_running(pid: &str) -> Option<u32> {
     (pid != std::process::id() && command(&pid.to_string())? == command("self")?).then_some(pid)
 }
 
-/// A file name an interrupted write leaves: a temporary file of [`medial_io::atomic`]
-/// (`.<name>-<random>.tmp`) or an unfinished `*.part` file.
-fn is_leftover(name: &str) -> bool {
-    (name.starts_with('.') && name.ends_with(".tmp")) || name.ends_with(".part")
+/// The canonical path of the folder `dir` (links resolved).
+fn canonical(dir: &Path) -> Result<PathBuf, CliError> {
+    std::fs::canonicalize(dir).map_err(|e| CliError::io(dir, e))
+}
+
+/// The path the set's file `relative` moves to: in `dir` (canonical `root`), its folders
+/// created, and refused with one line when it would leave the folder (a `..`, a root, or a
+/// folder on its way that is a link to elsewhere) or when something other than a regular file
+/// is there (a folder, a link, a device, a FIFO). The path returned has its folders resolved,
+/// so the rename cannot follow a link.
+fn destination(root: &Path, dir: &Path, relative: &str) -> Result<PathBuf, CliError> {
+    let path = dir.join(relative);
+    let refuse = |what: &str| CliError::io(&path, std::io::Error::other(what.to_string()));
+    if !is_relative_inside(relative) {
+        return Err(refuse("not a path inside the output folder"));
+    }
+    let (Some(parent), Some(name)) = (path.parent(), path.file_name()) else {
+        return Err(refuse("not a path inside the output folder"));
+    };
+    create_dir(parent)?;
+    let parent = canonical(parent)?;
+    if !parent.starts_with(root) {
+        return Err(refuse(&format!(
+            "its folder leads out of the output folder {} (a symbolic link?): refused to \
+             write there",
+            dir.display()
+        )));
+    }
+    let resolved = parent.join(name);
+    match std::fs::symlink_metadata(&resolved) {
+        Ok(meta) if !meta.is_file() => Err(refuse(
+            "exists and is not a regular file (a folder, a symbolic link, a device or a FIFO): \
+             refused to replace it; move it away or give another output folder",
+        )),
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(CliError::io(&path, e)),
+        _ => Ok(resolved),
+    }
+}
+
+/// Removes the file `relative` of an earlier set from `dir` (canonical `root`) when it is the
+/// tool's to remove, as proven by where it is: a regular file (not a link, which is never
+/// followed) whose folder, links resolved, is inside the output folder. Anything else is left
+/// where it is.
+fn remove_own(root: &Path, dir: &Path, relative: &str) -> Result<(), CliError> {
+    if !is_relative_inside(relative) {
+        return Ok(());
+    }
+    let path = dir.join(relative);
+    let (Some(parent), Some(name)) = (path.parent(), path.file_name()) else {
+        return Ok(());
+    };
+    let Ok(parent) = std::fs::canonicalize(parent) else {
+        return Ok(());
+    };
+    let resolved = parent.join(name);
+    let regular = std::fs::symlink_metadata(&resolved).is_ok_and(|m| m.is_file());
+    if parent.starts_with(root) && regular {
+        remove_if_present(&resolved)?;
+    } else if regular || std::fs::symlink_metadata(&resolved).is_ok() {
+        tracing::warn!(
+            "{}: listed by the earlier set but not a regular file inside the output folder: \
+             left as it is",
+            path.display()
+        );
+    }
+    Ok(())
 }
 
 /// The `files` a marker lists (empty when it is missing or lists none).
@@ -197,8 +278,8 @@ fn listed_files(marker: &Path) -> Vec<String> {
         .map_or_else(Vec::new, |l| l.files)
 }
 
-/// A relative path that stays inside the result folder (no root, no `..`): a marker from
-/// elsewhere must not make a commit remove files outside it.
+/// A relative path that stays inside the result folder by its text (no root, no `..`; the
+/// folders on its way are checked apart, [`destination`] and [`remove_own`]).
 fn is_relative_inside(relative: &str) -> bool {
     Path::new(relative)
         .components()
@@ -283,10 +364,12 @@ mod tests {
         write_set(d, &[("a.txt", "1")]);
         std::fs::create_dir_all(d.join(".medial-staging-1/flow")).unwrap();
         std::fs::create_dir_all(d.join("flow")).unwrap();
+        // A process id that runs no medial: the largest a Linux pid can be, plus one.
+        let dead = 4_194_305;
         for leftover in [
-            ".a_txt-x1y2z3.tmp",
-            "log.csv.part",
-            "flow/.b_vtk-abcdef.tmp",
+            format!(".medial-{dead}-a_txt-x1y2z3.tmp"),
+            format!(".medial-{dead}-log.csv.part"),
+            format!("flow/.medial-{dead}-b_vtk-abcdef.tmp"),
         ] {
             std::fs::write(d.join(leftover), "").unwrap();
         }
@@ -311,5 +394,68 @@ mod tests {
         .unwrap();
         write_set(&out, &[("a.txt", "1")]);
         assert!(dir.path().join("precious").exists());
+    }
+
+    /// Issue 33, items 2 and 9: the user's `*.part` and `.*.tmp` files, and the files behind a
+    /// link in the folder, stay; so does a file listed by a forged marker through a link.
+    #[test]
+    fn only_the_tools_own_files_are_removed_never_through_a_link() {
+        let dir = tempfile::tempdir().unwrap();
+        let (d, out) = (dir.path(), dir.path().join("out"));
+        let elsewhere = d.join("elsewhere");
+        std::fs::create_dir_all(out.join("flow")).unwrap();
+        std::fs::create_dir_all(&elsewhere).unwrap();
+        std::os::unix::fs::symlink(&elsewhere, out.join("lnk")).unwrap();
+        let mine = [
+            "precious.txt",
+            "notes.part",
+            ".draft.tmp",
+            ".medial-staging-x.tmp",
+            "log.csv.part",
+        ];
+        for name in mine {
+            std::fs::write(elsewhere.join(name), "x").unwrap();
+            std::fs::write(out.join(name), "x").unwrap();
+            std::fs::write(out.join("flow").join(name), "x").unwrap();
+        }
+        std::os::unix::fs::symlink(elsewhere.join("precious.txt"), out.join("link.txt")).unwrap();
+        std::fs::write(
+            out.join("summary.json"),
+            r#"{"files":["lnk/precious.txt","lnk/notes.part","link.txt","precious.txt"]}"#,
+        )
+        .unwrap();
+        write_set(&out, &[("a.txt", "1")]);
+        for name in mine {
+            assert!(elsewhere.join(name).exists(), "{name} behind the link went");
+            assert!(out.join("flow").join(name).exists(), "flow/{name} went");
+            // precious.txt was listed by the earlier marker and is a regular file inside:
+            // the earlier set's, replaced.
+            assert_eq!(out.join(name).exists(), name != "precious.txt", "{name}");
+        }
+        assert!(std::fs::symlink_metadata(out.join("link.txt")).is_ok());
+        // A flow folder that is a link to elsewhere is neither cleaned nor written through.
+        let flow = out.join("flow");
+        std::fs::rename(&flow, d.join("flow-real")).unwrap();
+        std::os::unix::fs::symlink(d.join("flow-real"), &flow).unwrap();
+        std::fs::write(d.join("flow-real/.medial-4194305-x.tmp"), "x").unwrap();
+        let mut set = ResultSet::begin(&out).unwrap();
+        std::fs::write(set.file("flow/t0.vtk").unwrap(), "1").unwrap();
+        let error = set
+            .commit("summary.json", |path, _| {
+                std::fs::write(path, "{}").map_err(|e| CliError::io(path, e))
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(
+            error.contains("flow/t0.vtk") && error.contains("leads out"),
+            "{error}"
+        );
+        assert!(d.join("flow-real/.medial-4194305-x.tmp").exists());
+        assert!(!d.join("flow-real/t0.vtk").exists());
+        assert_eq!(
+            std::fs::read_to_string(out.join("summary.json")).unwrap(),
+            r#"{"files":["a.txt"]}"#,
+            "the refused set changed the earlier one"
+        );
     }
 }

@@ -76,11 +76,30 @@ fn commit(
     Ok(())
 }
 
-/// A temporary file named `.<destination name>-<random><suffix>` in the destination's
-/// directory, dots of the destination name replaced by `_`, with the permissions of an ordinary
-/// new file. Only `suffix` has dots (besides the leading one): a library that reads the format
-/// from the last extension(s), or swaps the last extension to name its output (the `nifti`
-/// crate does), sees `suffix` and writes at this very path.
+/// The start of the name of every temporary file this process makes: `.medial-<pid>-`. The
+/// process id makes it the tool's and tells whose it is ([`temp_owner`]), so that a later run
+/// removes exactly the temporary files that interrupted runs left and never a user's file.
+pub fn temp_prefix() -> String {
+    format!("{TEMP_START}{}-", std::process::id())
+}
+
+const TEMP_START: &str = ".medial-";
+
+/// The process id of the run that made the temporary file `name` (a name that starts with
+/// [`temp_prefix`]'s pattern, `.medial-<digits>-`), or `None` for any other name.
+pub fn temp_owner(name: &str) -> Option<u32> {
+    let (pid, _) = name.strip_prefix(TEMP_START)?.split_once('-')?;
+    if pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+/// A temporary file named `.medial-<pid>-<destination name>-<random><suffix>` in the
+/// destination's directory, dots of the destination name replaced by `_`, with the permissions
+/// of an ordinary new file. Only `suffix` has dots (besides the leading one): a library that
+/// reads the format from the last extension(s), or swaps the last extension to name its output
+/// (the `nifti` crate does), sees `suffix` and writes at this very path.
 fn temp_file_beside(path: &Path, suffix: &str) -> std::io::Result<NamedTempFile> {
     let dir = match path.parent() {
         Some(parent) if !parent.as_os_str().is_empty() => parent,
@@ -90,7 +109,7 @@ fn temp_file_beside(path: &Path, suffix: &str) -> std::io::Result<NamedTempFile>
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    let prefix = format!(".{}-", name.replace('.', "_"));
+    let prefix = format!("{}{}-", temp_prefix(), name.replace('.', "_"));
     let mut builder = tempfile::Builder::new();
     builder.prefix(&prefix).suffix(suffix);
     #[cfg(unix)]
@@ -177,7 +196,11 @@ mod tests {
         let path = dir.path().join("image.nii.gz");
         write_atomic_via_path(&path, ".nii.gz", |temp| {
             let name = temp.file_name().expect("name").to_string_lossy();
-            assert!(name.starts_with(".image_nii_gz-"), "{name}");
+            assert!(
+                name.starts_with(&format!("{}image_nii_gz-", temp_prefix())),
+                "{name}"
+            );
+            assert_eq!(temp_owner(&name), Some(std::process::id()));
             assert!(name.ends_with(".nii.gz"), "{name}");
             assert_eq!(name.matches('.').count(), 3, "{name}");
             std::fs::write(temp, b"data").map_err(|e| Error::io(temp, e))
@@ -200,6 +223,22 @@ mod tests {
         assert!(matches!(err, Error::Format { .. }), "{err:?}");
         assert_eq!(std::fs::read(&path).expect("read"), b"precious");
         assert_eq!(leftovers(dir.path()), vec!["keep.nii".to_string()]);
+    }
+
+    #[test]
+    fn only_the_tools_temporary_names_have_an_owner() {
+        assert_eq!(temp_owner(".medial-123-a_vtk-x1y2z3.tmp"), Some(123));
+        assert_eq!(temp_owner(".medial-123-log.csv.part"), Some(123));
+        for name in [
+            ".a_vtk-x1y2z3.tmp",
+            "log.csv.part",
+            ".medial-staging-123",
+            ".medial--x.tmp",
+            ".medial-12a-x.tmp",
+            "medial-123-x.tmp",
+        ] {
+            assert_eq!(temp_owner(name), None, "{name}");
+        }
     }
 
     #[cfg(unix)]

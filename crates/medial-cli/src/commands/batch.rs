@@ -6,7 +6,6 @@
 //! `DIR/SUBJECT/failed.json` and the others go on. `--shard` (or a Slurm array task) takes
 //! a share of the subjects; `--slurm` writes the scripts of a Slurm job array instead of fitting.
 
-use crate::fitting::{self, FitOptions, Inputs};
 use crate::cohort::gather::{self, Failure, Gathered, Standing};
 use crate::cohort::shard::Shard;
 use crate::cohort::slurm::{self, SlurmOptions};
@@ -14,6 +13,7 @@ use crate::cohort::subjects::{self, Subject};
 use crate::cohort::FAILED_JSON;
 use crate::config::Config;
 use crate::error::CliError;
+use crate::fitting::{self, FitOptions, Inputs};
 use crate::output::{print_json, write_json};
 use crate::signals::Signals;
 use std::path::{Path, PathBuf};
@@ -94,6 +94,9 @@ pub fn run(args: &BatchArgs, threads: usize, quiet: bool) -> Result<(), CliError
         .filter(|(position, _)| shard.map_or(true, |s| s.takes(*position)))
         .map(|(_, s)| s)
         .collect();
+    for subject in &mine {
+        result_folder_or_none(&dir.join(&subject.name), &subject.name, &args.subjects)?;
+    }
     let stopped = fit_all(&mine, args.config.as_deref(), &dir, threads, quiet)?;
     let gathered = gather::gather(&dir, &template, &names)?;
     print_json(&gathered)?;
@@ -161,6 +164,52 @@ fn fit_all(
         }
     }
     Ok(None)
+}
+
+/// `Ok` when the subject `name`'s folder `out` does not exist, is empty, or holds what a fit
+/// leaves (its `summary.json`, `failed.json`, `checkpoint.bin`, `config.toml`, alignment, or a
+/// staging folder or temporary file of the tool); refused, before any fit, when it is
+/// something else (a folder of the user's beside the outputs, a file, a link), which a fit
+/// must not write into.
+fn result_folder_or_none(out: &Path, name: &str, table: &Path) -> Result<(), CliError> {
+    const LEFT_BY_A_FIT: [&str; 5] = [
+        "summary.json",
+        FAILED_JSON,
+        crate::checkpoint::FILE,
+        "config.toml",
+        "aligned_template.vtk",
+    ];
+    let refuse = |what: &str| CliError::Subjects {
+        path: table.into(),
+        message: format!(
+            "subject '{name}': {} {what}: a fit must not write there; rename the subject or \
+             move that away",
+            out.display()
+        ),
+    };
+    match std::fs::symlink_metadata(out) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(CliError::io(out, e)),
+        Ok(meta) if meta.file_type().is_symlink() => Err(refuse("is a symbolic link")),
+        Ok(meta) if !meta.is_dir() => Err(refuse("exists and is not a folder")),
+        Ok(_) => {
+            let names: Vec<String> = std::fs::read_dir(out)
+                .map_err(|e| CliError::io(out, e))?
+                .flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect();
+            let of_a_fit =
+                |n: &String| LEFT_BY_A_FIT.contains(&n.as_str()) || n.starts_with(".medial-");
+            if names.is_empty() || names.iter().any(of_a_fit) {
+                Ok(())
+            } else {
+                Err(refuse(
+                    "is a folder that no fit wrote (it holds no summary.json, failed.json or \
+                     checkpoint.bin)",
+                ))
+            }
+        }
+    }
 }
 
 /// Fits `subject` into `out` (from its checkpoint if `resume`), as `medial fit` would.

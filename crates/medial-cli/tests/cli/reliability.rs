@@ -22,6 +22,41 @@ fn binary() -> Command {
     )
 }
 
+/// A short SSD fit of the shipped toy to itself bent by 10° (`medial synth --from`, written
+/// into `dir`), a second or two, as a config in `dir`.
+fn quick_config(dir: &Path) -> PathBuf {
+    let bent = dir.join("bent");
+    let o = medial(&[
+        "synth",
+        "--from",
+        s(&toy("template.vtk")),
+        "--bend",
+        "10",
+        "--spacing",
+        "1",
+        "--out",
+        s(&bent),
+    ]);
+    assert!(o.status.success(), "synth: {}", text(&o.stderr));
+    let path = dir.join("quick.toml");
+    let text = format!(
+        "[model]\ntemplate = {:?}\n\n[flow]\nsigma = 2.0\ntime_steps = 5\nkinetic_weight = 0.005\n\n\
+         [output]\nevery_time_point = false\n\n[[stage]]\nname = \"ssd\"\nattachment = \"ssd\"\n\
+         target = {:?}\nmu = 20.0\nal_iterations = 1\nmax_iterations = 15\n\
+         tolerance_deg = 90.0\ntolerance_pct = 100.0\n",
+        s(&toy("template.vtk")),
+        s(&bent.join("target_boundary.vtk")),
+    );
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Runs `medial fit CONFIG --out OUT` and asserts success.
+fn fit(config: &Path, out: &Path) {
+    let o = medial(&["fit", s(config), "--out", s(out), "--quiet"]);
+    assert!(o.status.success(), "fit: {}", text(&o.stderr));
+}
+
 fn toy(name: &str) -> PathBuf {
     Path::new(EXAMPLES).join("toy").join(name)
 }
@@ -94,4 +129,85 @@ fn slurm_scripts_never_execute_the_output_path() {
             assert!(!d.join(format!("pwned{n}")).exists(), "{hostile}: executed");
         }
     }
+}
+
+/// Items 2 and 9: a fit into a folder whose earlier `summary.json` lists a file behind a
+/// link, beside the user's `*.part` and `.*.tmp` files (in the folder and in `flow/`), removes
+/// none of them.
+#[test]
+fn a_fit_removes_nothing_behind_a_link_nor_the_users_part_and_tmp_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (out, elsewhere) = (d.join("out"), d.join("elsewhere"));
+    std::fs::create_dir_all(out.join("flow")).unwrap();
+    std::fs::create_dir_all(&elsewhere).unwrap();
+    std::fs::write(elsewhere.join("precious.txt"), "keep").unwrap();
+    std::os::unix::fs::symlink(&elsewhere, out.join("lnk")).unwrap();
+    std::fs::write(
+        out.join("summary.json"),
+        r#"{"files":["lnk/precious.txt"]}"#,
+    )
+    .unwrap();
+    let users = [
+        "notes.part",
+        ".draft.tmp",
+        "flow/mine.part",
+        "flow/.x.tmp",
+        "log.csv.part",
+    ];
+    for name in users {
+        std::fs::write(out.join(name), "mine").unwrap();
+    }
+    fit(&quick_config(d), &out);
+    assert!(
+        elsewhere.join("precious.txt").exists(),
+        "deleted through the link"
+    );
+    for name in users {
+        assert!(out.join(name).exists(), "{name} was deleted");
+    }
+}
+
+/// Item 9: a batch subject named like a folder of the user's beside the outputs is refused
+/// before any fit; nothing in that folder changes.
+#[test]
+fn a_batch_never_writes_into_a_folder_that_is_not_a_result_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("cohort");
+    std::fs::create_dir_all(out.join("images")).unwrap();
+    std::fs::write(out.join("images/scan.part"), "mine").unwrap();
+    let csv = d.join("subjects.csv");
+    let target = toy("target_boundary.vtk");
+    std::fs::write(
+        &csv,
+        format!("subject,target\na,{0}\nimages,{0}\n", s(&target)),
+    )
+    .unwrap();
+    let o = medial(&[
+        "batch",
+        s(&toy("template.vtk")),
+        s(&csv),
+        "--out",
+        s(&out),
+        "--config",
+        s(&quick_config(d)),
+    ]);
+    let err = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("subject 'images'") && err.contains("no fit wrote"),
+        "{err}"
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        !out.join("a").exists(),
+        "a subject was fitted before the refusal"
+    );
+    let names: Vec<_> = std::fs::read_dir(out.join("images"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert_eq!(names, ["scan.part"]);
 }

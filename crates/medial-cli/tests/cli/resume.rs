@@ -1,5 +1,5 @@
 //! Fits that are stopped and resumed, through the built binary: real SIGTERM / SIGINT / SIGKILL
-//! sent to a running `medial fit` once `log.csv.part` has a given number of rows, the results
+//! sent to a running `medial fit` once its `log.csv.part` has a given number of rows, the results
 //! as a set (`summary.json` lists them; no leftovers), and `--resume` ending with the bytes of
 //! a fit that was never stopped.
 //!
@@ -101,9 +101,22 @@ fn fit(args: &[&str]) {
     assert!(o.status.success(), "fit {args:?}: {}", text(&o.stderr));
 }
 
-/// Rows of `dir/log.csv.part` (0 before it exists).
+/// The running fit's log in `dir`, `.medial-<pid>-log.csv.part` (its `log.csv` as it goes).
+fn log_part(dir: &Path) -> Option<PathBuf> {
+    std::fs::read_dir(dir)
+        .ok()?
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| {
+            let name = p.file_name().unwrap_or_default().to_string_lossy();
+            name.starts_with(".medial-") && name.ends_with("-log.csv.part")
+        })
+}
+
+/// Rows of the running fit's log in `dir` (0 before it exists).
 fn rows(dir: &Path) -> usize {
-    std::fs::read_to_string(dir.join("log.csv.part"))
+    log_part(dir)
+        .and_then(|p| std::fs::read_to_string(p).ok())
         .map(|t| t.lines().count().saturating_sub(1))
         .unwrap_or(0)
 }
@@ -357,7 +370,7 @@ fn periodic_checkpoints_do_not_change_the_bits_and_survive_a_hard_kill() {
         checkpoint.exists() && rows(&out) >= base.row("dice", 1, 0)
     });
     assert_eq!(o.status.code(), None, "killed");
-    assert!(out.join("log.csv.part").exists());
+    assert!(log_part(&out).is_some());
     assert!(!out.join("summary.json").exists(), "no set was written");
     // Resumed with checkpoints at every few iterations: each is a pause and a resume in the
     // running process, which must not change a bit either.
@@ -445,7 +458,7 @@ fn a_killed_fit_leaves_the_earlier_set_byte_identical() {
         );
     }
     // The killed run's leftovers, removed by the next run.
-    assert!(out.join("log.csv.part").exists());
+    assert!(log_part(&out).is_some());
     fit(&[s(&short), "--out", s(&out)]);
     complete_set(&out);
 }
