@@ -69,11 +69,58 @@ fn commit(
     fill: impl FnOnce(&NamedTempFile) -> Result<()>,
 ) -> Result<()> {
     let io_error = |e: std::io::Error| Error::io(path, e);
+    check_destination(path)?;
     let temp = temp_file_beside(path, suffix).map_err(io_error)?;
     fill(&temp)?;
     temp.as_file().sync_all().map_err(io_error)?;
     temp.persist(path).map_err(|e| io_error(e.error))?;
     Ok(())
+}
+
+/// `Ok` when `path` may be replaced by a regular file: nothing is there, or a regular file, or
+/// a symbolic link (the rename replaces the link, never what it leads to). A folder, a device,
+/// a FIFO or a socket there is refused with [`Error::Format`] (one line naming the path):
+/// replacing `/dev/null` by a file, or a FIFO another program reads, is never what was meant.
+pub fn check_destination(path: &Path) -> Result<()> {
+    let kind = match std::fs::symlink_metadata(path) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(Error::io(path, e)),
+        Ok(meta) => meta.file_type(),
+    };
+    if kind.is_file() || kind.is_symlink() {
+        return Ok(());
+    }
+    let what = if kind.is_dir() {
+        "a folder"
+    } else {
+        special_kind(&kind)
+    };
+    Err(Error::format(
+        path,
+        &format!(
+            "is {what}, not a regular file: refused to replace it by an output (give the path \
+             of a file)"
+        ),
+    ))
+}
+
+/// What a file that is neither a regular file, a link nor a folder is.
+fn special_kind(kind: &std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if kind.is_char_device() || kind.is_block_device() {
+            return "a device";
+        }
+        if kind.is_fifo() {
+            return "a FIFO";
+        }
+        if kind.is_socket() {
+            return "a socket";
+        }
+    }
+    let _ = kind;
+    "not a regular file"
 }
 
 /// The start of the name of every temporary file this process makes: `.medial-<pid>-`. The
@@ -223,6 +270,40 @@ mod tests {
         assert!(matches!(err, Error::Format { .. }), "{err:?}");
         assert_eq!(std::fs::read(&path).expect("read"), b"precious");
         assert_eq!(leftovers(dir.path()), vec!["keep.nii".to_string()]);
+    }
+
+    /// Issue 33, item 3: a device, a FIFO or a folder at the output path is refused and left
+    /// as it was.
+    #[cfg(unix)]
+    #[test]
+    fn devices_fifos_and_folders_are_never_replaced() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let fifo = dir.path().join("fifo");
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .expect("mkfifo runs");
+        assert!(made.success());
+        let folder = dir.path().join("folder");
+        std::fs::create_dir(&folder).expect("folder");
+        for (path, what) in [
+            (Path::new("/dev/null"), "a device"),
+            (fifo.as_path(), "a FIFO"),
+            (folder.as_path(), "a folder"),
+        ] {
+            let err = write_atomic(path, |w| w.write_all(b"x")).expect_err("refused");
+            let message = err.to_string();
+            assert!(message.contains(what), "{message}");
+            assert!(message.contains(&path.display().to_string()), "{message}");
+            assert_eq!(message.lines().count(), 1);
+            let err = write_atomic_via_path(path, ".nii", |_| Ok(())).expect_err("refused");
+            assert!(err.to_string().contains(what), "{err}");
+        }
+        use std::os::unix::fs::FileTypeExt;
+        let kind = std::fs::symlink_metadata(&fifo).expect("fifo").file_type();
+        assert!(kind.is_fifo(), "the FIFO was replaced");
+        assert!(folder.is_dir());
+        assert_eq!(leftovers(dir.path()), ["fifo", "folder"]);
     }
 
     #[test]

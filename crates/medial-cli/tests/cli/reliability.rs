@@ -211,3 +211,58 @@ fn a_batch_never_writes_into_a_folder_that_is_not_a_result_folder() {
         .collect();
     assert_eq!(names, ["scan.part"]);
 }
+
+/// Makes a FIFO at `path`.
+fn mkfifo(path: &Path) {
+    let made = Command::new("mkfifo").arg(path).status().unwrap();
+    assert!(made.success());
+}
+
+/// Item 3: a FIFO or a folder at an output path is refused with one line and stays; so is a
+/// FIFO at a path of a fit's result set, before the earlier set changes.
+#[test]
+fn fifos_and_folders_at_output_paths_are_refused_and_left_as_they_are() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (fifo, folder) = (d.join("mask.nii.gz"), d.join("folder.nii.gz"));
+    mkfifo(&fifo);
+    std::fs::create_dir(&folder).unwrap();
+    for (out, what) in [(&fifo, "a FIFO"), (&folder, "a folder")] {
+        let o = medial(&[
+            "rasterize",
+            s(&toy("template.vtk")),
+            "--spacing",
+            "2",
+            "--out",
+            s(out),
+        ]);
+        let err = text(&o.stderr);
+        assert!(!o.status.success(), "{what} replaced");
+        assert!(err.contains(s(out)) && err.contains(what), "{err}");
+        assert_eq!(err.lines().count(), 1, "{err}");
+    }
+    assert!(std::fs::symlink_metadata(&fifo)
+        .unwrap()
+        .file_type()
+        .is_fifo());
+    assert!(folder.is_dir());
+    let out = d.join("fit");
+    let config = quick_config(d);
+    fit(&config, &out);
+    let summary = std::fs::read(out.join("summary.json")).unwrap();
+    std::fs::remove_file(out.join("config.toml")).unwrap();
+    mkfifo(&out.join("config.toml"));
+    let o = medial(&["fit", s(&config), "--out", s(&out), "--quiet"]);
+    let err = text(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("config.toml") && err.contains("not a regular file"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(out.join("summary.json")).unwrap(), summary);
+    let kind = std::fs::symlink_metadata(out.join("config.toml"))
+        .unwrap()
+        .file_type();
+    assert!(kind.is_fifo());
+}
