@@ -88,6 +88,8 @@ pub struct Start {
     /// The template as given (written as `template.vtk`, so that `medial apply` can carry the
     /// given template's space by the alignment and the moves after it).
     pub given: Model,
+    /// What the initial alignment did, one line per step (in summary.json as `alignment`).
+    pub notes: Vec<String>,
 }
 
 /// The config of a fit: `config` with the flags of `inputs` in place of its template and
@@ -161,6 +163,7 @@ fn automatic(inputs: &Inputs, out: &Path) -> Result<Resolved, CliError> {
             model: start.model,
             alignment: start.alignment,
             given: model,
+            notes: start.notes,
         }),
     })
 }
@@ -276,6 +279,7 @@ pub fn run(resolved: &Resolved, options: &FitOptions) -> Result<Summary, CliErro
         flow: engine.flow(),
         prepared: engine.stages(),
         planned: &planned,
+        alignment: resolved.start.as_ref().map_or(&[], |s| &s.notes),
     };
     let (resumed, fingerprint) = if options.resume {
         let fingerprint = Fingerprint::of(config)?;
@@ -305,6 +309,8 @@ struct Fit<'a> {
     flow: &'a Flow,
     prepared: &'a [PreparedStage],
     planned: &'a [PlannedStage<'a>],
+    /// An automatic fit's alignment notes ([`Start::notes`]).
+    alignment: &'a [String],
 }
 
 /// How the optimisation of a fit ended.
@@ -607,6 +613,7 @@ impl Fit<'_> {
             over_time: time_points::over_time(points),
             step_strains,
             stages,
+            alignment: self.alignment.to_vec(),
             files: Vec::new(),
         }
     }

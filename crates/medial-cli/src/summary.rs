@@ -168,6 +168,10 @@ pub struct Summary {
     pub step_strains: Vec<f64>,
     /// Each stage.
     pub stages: Vec<StageSummary>,
+    /// An automatic fit: what its initial alignment did, one line per step (scale, thickness,
+    /// anisotropy, overlap before and after, the projection's moves, a fallback and its reason).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub alignment: Vec<String>,
     /// The other files of this set of results (paths relative to the folder, sorted): all in
     /// place once `summary.json` is ([`crate::results`]).
     pub files: Vec<String>,
