@@ -5,7 +5,7 @@
 //! the gradient (2-norm) from the exact kernel's, and the time of one evaluation at k = 102,776
 //! (three subdivisions; timed twice by hand, as criterion would take minutes).
 
-#[path = "../tests/common/heart.rs"]
+#[path = "../tests/engine/common/heart.rs"]
 mod heart;
 
 use criterion::{criterion_group, criterion_main, Criterion};

@@ -2,7 +2,6 @@
 //! model by the prisms, the gradient against finite differences, determinism across thread
 //! counts, and the real cmrep template and sphere from `shared/data`.
 
-
 use medial::attachment::dice::{DiceAttachment, DiceParams, DiceValue};
 use medial::image::rasterize::{self, grid_around, rasterize};
 use medial::image::volume::Volume;

@@ -5,7 +5,9 @@ use std::collections::{BTreeMap, HashMap};
 use std::f64::consts::PI;
 use std::path::Path;
 
-use medial::construction::inflate::{inflate, self_intersections, Inflated, MedialSheet, RadiusLimit};
+use medial::construction::inflate::{
+    inflate, self_intersections, Inflated, MedialSheet, RadiusLimit,
+};
 use medial::mesh::topology::{signed_volume, MeshDefect};
 use medial::synth::parameter_grid;
 use medial::{Error, Vec3};

@@ -11,8 +11,7 @@ use medial::mesh::subdivide::midpoint_subdivide;
 use medial::model::metrics::SpokeMetrics;
 use medial::model::template::MedialTemplate;
 use medial::synth::{
-    target_boundary, target_image, target_surface, PrincipalAxes, Shape,
-    SyntheticCase, Warp,
+    target_boundary, target_image, target_surface, PrincipalAxes, Shape, SyntheticCase, Warp,
 };
 use medial::{Error, TriMesh, Vec3};
 use nalgebra::{Matrix3, Matrix4, Rotation3, Unit};

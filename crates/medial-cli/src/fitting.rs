@@ -226,7 +226,10 @@ const GIVEN_TEMPLATE: &str = "template.vtk";
 /// An automatic fit's start belongs to its set: the aligned template and the initial map.
 fn write_start(set: &mut ResultSet, start: &Start) -> Result<(), CliError> {
     medial_io::affine::write_affine(&set.file(ALIGNMENT)?, &start.alignment)?;
-    for (name, model) in [(ALIGNED_TEMPLATE, &start.model), (GIVEN_TEMPLATE, &start.given)] {
+    for (name, model) in [
+        (ALIGNED_TEMPLATE, &start.model),
+        (GIVEN_TEMPLATE, &start.given),
+    ] {
         let path = set.file(name)?;
         match model {
             Model::Medial(t) => medial_io::cmrep::write_template(&path, t, write_options(false))?,

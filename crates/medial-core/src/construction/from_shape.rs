@@ -20,7 +20,9 @@
 use crate::construction::inflate::{inflate, self_intersections, MedialSheet};
 use crate::construction::project::{project, ProjectOptions};
 use crate::construction::skeleton::chart::ChartKind;
-use crate::construction::skeleton::{medial_points, sheet_of_mask, Sampling, ShapeSheet, MIN_FEATURE_ANGLE_DEG};
+use crate::construction::skeleton::{
+    medial_points, sheet_of_mask, Sampling, ShapeSheet, MIN_FEATURE_ANGLE_DEG,
+};
 use crate::fit::run::automatic;
 use crate::fit::Target;
 use crate::image::rasterize::{grid_around, grid_around_bounds, rasterize, voxel_dice};

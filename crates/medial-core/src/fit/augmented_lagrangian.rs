@@ -538,7 +538,10 @@ pub fn run_stage(
         Some(_) => {
             schedule.check()?;
             let extra = schedule.extend.map_or(0, |e| e.at_most);
-            (schedule.iterations + extra, schedule.coarse_flow(stage.flow)?)
+            (
+                schedule.iterations + extra,
+                schedule.coarse_flow(stage.flow)?,
+            )
         }
         None => (1, None),
     };
@@ -627,9 +630,9 @@ pub fn run_stage(
         };
         let extended = al_iteration + 1 >= scheduled
             && al_iteration + 1 < al_iterations
-            && schedule.extend.is_some_and(|e| {
-                violation > e.above && violation <= 0.5 * at.previous_violation
-            });
+            && schedule
+                .extend
+                .is_some_and(|e| violation > e.above && violation <= 0.5 * at.previous_violation);
         if outcome.unsound.is_some()
             || (outcome.settled && !coarse_settled)
             || (al_iteration + 1 >= scheduled && !extended)

@@ -156,9 +156,7 @@ fn align_to_points(boundary: &TriMesh, q: &[Vec3]) -> Result<InitialAlignment> {
     let affine = match affine_between(boundary.points(), q) {
         Ok(affine) => Some(affine).filter(|a| anisotropy(a) > AFFINE_ANISOTROPY),
         Err(e) => {
-            notes.push(format!(
-                "no initial affine map, the similarity alone: {e}"
-            ));
+            notes.push(format!("no initial affine map, the similarity alone: {e}"));
             None
         }
     };
@@ -239,7 +237,9 @@ pub fn align_template(
         };
         let spoke = mean_spoke(template) * crate::fit::align::Alignment::scale_of(&matrix);
         match project(&carried, &options) {
-            Ok(projection) if affine && projection.max_displacement > MAX_PROJECTION_MOVE * spoke => {
+            Ok(projection)
+                if affine && projection.max_displacement > MAX_PROJECTION_MOVE * spoke =>
+            {
                 notes.push(format!(
                     "the initial affine map (anisotropy {:.1} %) needs the projection to move \
                      landmarks by up to {:.3} mm, more than {MAX_PROJECTION_MOVE} of the mean \

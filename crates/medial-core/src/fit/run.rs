@@ -21,15 +21,15 @@ use crate::fit::guard::Guard;
 use crate::fit::initial::{
     align_template, initial_alignment, thickened, InitialAlignment, THICKEN_AT_LEAST,
 };
-use crate::image::rasterize::voxel_dice;
-use crate::model::MedialTemplate;
 use crate::fit::objective::ConstraintSet;
 use crate::fit::plan::{self, Geometry};
 use crate::fit::prepare::{PreparedStage, Target};
 use crate::fit::spec::FitSpec;
 use crate::fit::stages::{run_stages, FitEvent, PlannedStage};
 use crate::flow::Flow;
+use crate::image::rasterize::voxel_dice;
 use crate::memory::MemoryLimit;
+use crate::model::MedialTemplate;
 use crate::model::Model;
 use crate::synth::PrincipalAxes;
 use crate::Result;

@@ -19,7 +19,7 @@
 //! ```
 
 use crate::attachment::varifold::{Kind, DEFAULT_NORMAL_WIDTH};
-use crate::fit::augmented_lagrangian::{AlSchedule, MuUpdate};
+use crate::fit::augmented_lagrangian::AlSchedule;
 use crate::fit::optimize::LbfgsOptions;
 use crate::flow::kernel::MAX_TOLERANCE;
 use crate::flow::{Flow, FlowParams};
@@ -193,24 +193,8 @@ impl StageSpec {
             weight: None,
             constraints: None,
             constraint_units: ConstraintUnits::Relative,
-            schedule: AlSchedule {
-                mu: 1.0,
-                mu_factor: 10.0,
-                mu_max: 1e6,
-                iterations: 1,
-                mu_update: MuUpdate::Always,
-                first_iterations: None,
-                settle: None,
-                coarse: None,
-                extend: None,
-            },
-            lbfgs: LbfgsOptions {
-                max_iterations: 1000,
-                memory: 10,
-                gradient_tolerance: 1e-6,
-                relative_decrease: 1e-9,
-                progress: None,
-            },
+            schedule: AlSchedule::default(),
+            lbfgs: LbfgsOptions::default(),
             tolerance: MedialTolerance::default(),
         }
     }
