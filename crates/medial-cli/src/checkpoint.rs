@@ -3,9 +3,10 @@
 //! rows of `log.csv` up to it, the seconds spent, and a fingerprint of the config and input
 //! files, so that `medial fit … --resume DIR` continues only the fit it was written for.
 //!
-//! The file is the 8 bytes `MEDIALCK`, a little-endian `u32` format number, then the
-//! [`Saved`] record in postcard (every `f64` as its 8 bytes: ±∞ and NaN round-trip exactly).
-//! It is written atomically.
+//! The file is the 8 bytes `MEDIALCK`, a little-endian `u32` format number, the 32 bytes of
+//! the SHA-256 digest of the rest, then the [`Saved`] record in postcard (every `f64` as its 8
+//! bytes: ±∞ and NaN round-trip exactly). It is written atomically; a file whose digest does
+//! not match its record (damaged on disk or in a copy) is refused, never resumed.
 
 use crate::config::Config;
 use crate::error::CliError;
@@ -23,8 +24,12 @@ const MAGIC: &[u8; 8] = b"MEDIALCK";
 /// The layout of the record after [`MAGIC`]; raised whenever [`Saved`] or the engine's
 /// checkpoint types in it change. 2: the L-BFGS state as nalgebra vectors and the coarse time
 /// steps' restart point (format 1 checkpoints read as damaged before); 3: the L-BFGS state
-/// as plain lists (`medial_core::fit::lbfgs_vector`).
-const FORMAT: u32 = 3;
+/// as plain lists (`medial_core::fit::lbfgs_vector`); 4: the SHA-256 digest of the record
+/// before it.
+const FORMAT: u32 = 4;
+
+/// Bytes of the digest after the format number.
+const DIGEST: usize = 32;
 
 /// What a fit needs to go on where it paused.
 #[derive(Serialize, Deserialize)]
@@ -64,11 +69,13 @@ impl Saved {
 
     /// Writes the checkpoint to `path`, atomically.
     pub fn write(&self, path: &Path) -> Result<(), CliError> {
+        let record =
+            postcard::to_stdvec(self).map_err(|e| CliError::io(path, std::io::Error::other(e)))?;
         medial_io::atomic::write_atomic(path, |w| {
             w.write_all(MAGIC)?;
             w.write_all(&FORMAT.to_le_bytes())?;
-            postcard::to_io(self, w).map_err(std::io::Error::other)?;
-            Ok(())
+            w.write_all(&Sha256::digest(&record))?;
+            w.write_all(&record)
         })?;
         Ok(())
     }
@@ -102,8 +109,18 @@ impl Saved {
                 format.map_or_else(|| "?".into(), |f| f.to_string())
             )));
         }
-        let saved: Self = postcard::from_bytes(&body[4..])
-            .map_err(|e| error(format!("damaged checkpoint: {e}")))?;
+        let (digest, record) = body[4..]
+            .split_at_checked(DIGEST)
+            .ok_or_else(|| error("damaged checkpoint: it ends inside its header".into()))?;
+        if Sha256::digest(record).as_slice() != digest {
+            return Err(error(
+                "damaged checkpoint: its contents do not match their SHA-256 digest (the file \
+                 was changed or cut short); start afresh without --resume"
+                    .into(),
+            ));
+        }
+        let saved: Self =
+            postcard::from_bytes(record).map_err(|e| error(format!("damaged checkpoint: {e}")))?;
         if saved.version != env!("CARGO_PKG_VERSION") {
             return Err(error(format!(
                 "written by medial {}, this is {}: resume with that version, or start afresh \
