@@ -77,17 +77,8 @@ fn dice() {
         .expect("mask")
         .smoothed(0.2)
         .expect("image");
-    let medial_of: Vec<usize> = (template.medial_index().iter())
-        .map(|&m| template.atom_landmark(m))
-        .collect();
-    let dice = DiceAttachment::new(
-        template.boundary_triangles(),
-        &medial_of,
-        template.landmark_count(),
-        image,
-        DiceParams::default(),
-    )
-    .expect("attachment");
+    let dice =
+        DiceAttachment::for_template(&template, image, DiceParams::default()).expect("attachment");
     let mut grad = vec![Vec3::zeros(); q.len()];
     run_measured(|| dice.dice(q, Some(&mut grad)).expect("dice").dice);
 }

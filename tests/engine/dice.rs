@@ -654,19 +654,8 @@ fn voxel_dice_counts_overlapping_voxels() {
 fn attachment_from_the_cmrep_reader() {
     let path = std::path::Path::new(DATA).join("t001_template_bcmrep.vtk");
     let template = medial::io::cmrep::read_template(&path).unwrap();
-    let medial_of: Vec<usize> = template
-        .medial_index()
-        .iter()
-        .map(|&m| template.atom_landmark(m))
-        .collect();
-    let dice = DiceAttachment::new(
-        template.boundary_triangles(),
-        &medial_of,
-        template.landmark_count(),
-        unit_image(),
-        DiceParams::default(),
-    )
-    .unwrap();
+    let dice =
+        DiceAttachment::for_template(&template, unit_image(), DiceParams::default()).unwrap();
     let ours = t001();
     assert_eq!(template.landmark_count(), ours.q.len());
     let theirs = dice.dice(template.landmarks(), None).unwrap();

@@ -2,9 +2,10 @@
 //! template (the figures the README quotes), large once the boundary moves without its medial
 //! sheet or the medial sheet leaves the object.
 
+use medial::mesh::PrincipalAxes;
 use medial::model::fidelity::{BallFidelity, FidelitySummary};
 use medial::model::template::MedialTemplate;
-use medial::synth::{PrincipalAxes, Warp};
+use medial::synth::Warp;
 use medial::Vec3;
 use nalgebra::Matrix4;
 use std::path::Path;

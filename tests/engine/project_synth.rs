@@ -8,11 +8,10 @@ use std::sync::OnceLock;
 use medial::construction::inflate::{inflate, MedialSheet};
 use medial::construction::project::{project, ProjectOptions};
 use medial::mesh::subdivide::midpoint_subdivide;
+use medial::mesh::PrincipalAxes;
 use medial::model::metrics::SpokeMetrics;
 use medial::model::template::MedialTemplate;
-use medial::synth::{
-    target_boundary, target_image, target_surface, PrincipalAxes, Shape, SyntheticCase, Warp,
-};
+use medial::synth::{target_boundary, target_image, target_surface, Shape, SyntheticCase, Warp};
 use medial::{Error, TriMesh, Vec3};
 use nalgebra::{Matrix3, Matrix4, Rotation3, Unit};
 use proptest::prelude::*;
@@ -300,25 +299,13 @@ fn the_warped_template_matches_the_target_image() {
             .unwrap()
             .smoothed(0.2)
             .unwrap();
-        let medial_of: Vec<usize> = t
-            .medial_index()
-            .iter()
-            .map(|&m| t.atom_landmark(m))
-            .collect();
         let warped: Vec<Vec3> = t.landmarks().iter().map(|p| case.warp.apply(p)).collect();
         let dice = |layers: usize, q: &[Vec3]| {
             let params = DiceParams {
                 subdivision: 2,
                 layers,
             };
-            let d = DiceAttachment::new(
-                t.boundary_triangles(),
-                &medial_of,
-                t.landmark_count(),
-                image.clone(),
-                params,
-            )
-            .unwrap();
+            let d = DiceAttachment::for_template(t, image.clone(), params).unwrap();
             d.dice(q, None).unwrap().dice
         };
         let (at_target_5, at_target_10) = (dice(5, &warped), dice(10, &warped));

@@ -29,7 +29,7 @@ use crate::fit::spec::{AttachmentSpec, DiceSpec, FitSpec, FlowSettings, StageSpe
 use crate::flow::kernel::GaussianKernel;
 use crate::model::template::MedialTemplate;
 use crate::model::Model;
-use crate::synth::PrincipalAxes;
+use crate::mesh::PrincipalAxes;
 use crate::{Error, Result, TriMesh, Vec3};
 use serde::Serialize;
 

@@ -251,22 +251,11 @@ fn dice(
             source: Box::new(e),
         })?;
     drop(fine);
-    let medial_of: Vec<usize> = template
-        .medial_index()
-        .iter()
-        .map(|&m| template.atom_landmark(m))
-        .collect();
     let params = DiceParams {
         subdivision: spec.subdivision,
         layers: spec.layers,
     };
-    let attachment = DiceAttachment::new(
-        template.boundary_triangles(),
-        &medial_of,
-        template.landmark_count(),
-        image,
-        params,
-    )?;
+    let attachment = DiceAttachment::for_template(template, image, params)?;
     if attachment.dice(template.landmarks(), None)?.overlap <= 0.0 {
         // The attachment has refused an empty foreground, the template has boundary points.
         let foreground = mask

@@ -31,7 +31,7 @@ use crate::image::rasterize::voxel_dice;
 use crate::memory::MemoryLimit;
 use crate::model::MedialTemplate;
 use crate::model::Model;
-use crate::synth::PrincipalAxes;
+use crate::mesh::PrincipalAxes;
 use crate::Result;
 use nalgebra::Matrix4;
 

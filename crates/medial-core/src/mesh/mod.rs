@@ -2,11 +2,13 @@
 //! subdivision ([`subdivide`]), their topology ([`topology`]) and distances to them
 //! ([`distance`]).
 
+pub mod axes;
 pub mod bounds;
 pub mod distance;
 pub mod subdivide;
 pub mod topology;
 
+pub use axes::PrincipalAxes;
 pub use bounds::Bounds;
 
 use crate::{Error, Result};

@@ -24,13 +24,11 @@
 //! and [`target_boundary`], [`target_surface`] and [`target_image`] the targets.
 //! [`parameter_grid`] triangulates the parameter rectangle of a new analytic sheet.
 
-mod axes;
 mod case;
 mod shape;
 mod sheets;
 mod warp;
 
-pub use axes::PrincipalAxes;
 pub use case::{
     target_boundary, target_image, target_surface, SyntheticCase, SHEET_SUBDIVISIONS,
     TARGET_SUBDIVISIONS,

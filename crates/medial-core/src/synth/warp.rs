@@ -1,7 +1,7 @@
 //! The known smooth diffeomorphism of a synthetic case: a twist and a bend about a long axis,
 //! then an affine map, with its closed-form inverse.
 
-use super::PrincipalAxes;
+use crate::mesh::PrincipalAxes;
 use crate::{Error, Result, Vec3};
 use nalgebra::{Matrix3, Matrix4, Rotation3};
 use std::f64::consts::PI;

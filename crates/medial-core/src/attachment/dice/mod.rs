@@ -129,6 +129,27 @@ pub struct DiceAttachment {
 }
 
 impl DiceAttachment {
+    /// The attachment of a medial template's interior (its prisms between the boundary and
+    /// the medial points its spokes end at) against `image`, already smoothed
+    /// (`foreground(label).smoothed(sigma)`): [`DiceAttachment::new`] with the template's
+    /// triangles and spokes.
+    pub fn for_template(
+        template: &crate::model::MedialTemplate,
+        image: Volume,
+        params: DiceParams,
+    ) -> Result<Self> {
+        let medial_of: Vec<usize> = (template.medial_index().iter())
+            .map(|&m| template.atom_landmark(m))
+            .collect();
+        Self::new(
+            template.boundary_triangles(),
+            &medial_of,
+            template.landmark_count(),
+            image,
+            params,
+        )
+    }
+
     /// Prepares the attachment.
     ///
     /// `boundary_triangles`: the closed, consistently outward-oriented boundary mesh over the

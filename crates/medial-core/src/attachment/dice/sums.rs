@@ -250,8 +250,6 @@ mod tests {
             .unwrap()
             .smoothed(0.3)
             .unwrap();
-        let nb = template.boundary_count();
-        let medial_of: Vec<usize> = (template.medial_index().iter()).map(|&m| nb + m).collect();
         let q: Vec<Vec3> = (template.landmarks().iter())
             .map(|p| p + Vec3::new(0.3 * (0.2 * p.y).sin(), 0.1, -0.2))
             .collect();
@@ -260,14 +258,7 @@ mod tests {
                 subdivision: 1,
                 layers,
             };
-            let dice = DiceAttachment::new(
-                template.boundary_triangles(),
-                &medial_of,
-                q.len(),
-                image.clone(),
-                params,
-            )
-            .unwrap();
+            let dice = DiceAttachment::for_template(&template, image.clone(), params).unwrap();
             let ends: Vec<Ends> = (dice.stencils.iter())
                 .map(|s| Ends {
                     boundary: s.boundary.apply(&q),

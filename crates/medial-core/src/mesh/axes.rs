@@ -1,10 +1,12 @@
-//! Principal axes of a point set: the frame of the twist and bend of a general template.
+//! Principal axes of a point set: the frame a template's size, thickness and long axis are
+//! measured in (the kernel width of a fit, the twist and bend of a synthetic warp).
 
 use crate::mesh::{centroid_and_covariance, Bounds};
 use crate::{Error, Result, Vec3};
 use nalgebra::{Matrix3, Rotation3};
 
-/// The principal axes of a point set, as [`Warp::bending`](super::Warp::bending) uses them.
+/// The principal axes of a point set, as [`crate::synth::Warp::bending`] and
+/// [`crate::fit::plan`] use them.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PrincipalAxes {
     /// Centre of the bounding box of the points in the frame, `mean + F·(lo + hi)/2`, mm.
