@@ -36,6 +36,9 @@ use crate::model::Model;
 use crate::{Error, Result, TriMesh, Vec3};
 
 /// What a stage is fitted to, in memory.
+// A target is made once per stage and moved into it: the size of the image variant's header
+// does not matter, and boxing it would only add a step to every match.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Debug)]
 pub enum Target {
     /// Points in correspondence with the template's boundary points (same count and order):
