@@ -36,8 +36,8 @@ pub struct TemplateArgs {
     /// Distance between neighbouring atoms of the template, mm.
     #[arg(long, value_name = "MM")]
     pub spacing: Option<f64>,
-    /// About this many atoms in the template [default: 300].
-    #[arg(long, value_name = "N")]
+    /// About this many atoms in the template, at most 100000 [default: 300].
+    #[arg(long, value_name = "N", value_parser = atom_count)]
     pub atoms: Option<usize>,
     /// With a segmentation: the foreground label [default: every voxel > 0].
     #[arg(long, value_name = "L")]
@@ -60,6 +60,21 @@ pub struct TemplateArgs {
     /// Write binary legacy VTK instead of ASCII.
     #[arg(long)]
     pub binary: bool,
+}
+
+/// The most atoms `--atoms` takes: the engine's sheet lattices stop at 64 rings (about 50,000
+/// atoms a sheet), so a larger count only spends minutes before failing (issue 33).
+const MAX_ATOMS: usize = 100_000;
+
+/// `--atoms`: a count from 1 to [`MAX_ATOMS`], refused at once beyond.
+fn atom_count(text: &str) -> Result<usize, String> {
+    match text.parse::<usize>() {
+        Ok(n) if (1..=MAX_ATOMS).contains(&n) => Ok(n),
+        _ => Err(format!(
+            "expected a count of atoms from 1 to {MAX_ATOMS}, got '{text}' (a medial sheet's \
+             lattice takes at most about 50000 atoms)"
+        )),
+    }
 }
 
 /// `--voxel`: a positive number of mm.

@@ -62,10 +62,11 @@ impl Panel {
     }
 
     /// Whether y is drawn on a log scale: every value positive and the values spanning two
-    /// decades or more.
+    /// decades or more, within [`LOG_LIMITS`] (plotters' tick loop on a log axis down to a
+    /// subnormal value never ends; such an axis is drawn linear).
     pub fn log_y(&self) -> bool {
         let (lo, hi) = span(self.finite().map(|p| p.1));
-        lo > 0.0 && hi / lo >= 100.0
+        lo >= LOG_LIMITS.0 && hi <= LOG_LIMITS.1 && hi / lo >= 100.0
     }
 }
 
@@ -76,8 +77,20 @@ fn span(values: impl Iterator<Item = f64>) -> (f64, f64) {
     })
 }
 
-/// A range around `[lo, hi]` that is never empty: 5 % more on each side on a linear axis.
+/// The values a log axis may span.
+const LOG_LIMITS: (f64, f64) = (1e-100, 1e100);
+
+/// The largest magnitude a linear axis spans: beyond, its width overflows and plotters' tick
+/// loop never ends. Points beyond are clipped.
+const LINEAR_LIMIT: f64 = 1e300;
+
+/// A range around `[lo, hi]` that is never empty: 5 % more on each side on a linear axis,
+/// within ±[`LINEAR_LIMIT`].
 fn padded(lo: f64, hi: f64) -> Range<f64> {
+    let (lo, hi) = (
+        lo.clamp(-LINEAR_LIMIT, LINEAR_LIMIT),
+        hi.clamp(-LINEAR_LIMIT, LINEAR_LIMIT),
+    );
     if hi > lo {
         let pad = 0.05 * (hi - lo);
         lo - pad..hi + pad
@@ -159,7 +172,7 @@ where
         .margin(8)
         .x_label_area_size(34)
         .y_label_area_size(62)
-        .build_cartesian_2d(x, y_axis)?;
+        .build_cartesian_2d(x.clone(), y_axis)?;
     let format = |v: &f64| number(*v);
     chart
         .configure_mesh()
@@ -185,7 +198,8 @@ where
             ("sans-serif", 10).into_font().color(&RGBColor(90, 90, 90)),
         )))?;
     }
-    let keep = |&(px, py): &(f64, f64)| px.is_finite() && py.is_finite() && (!log || py > 0.0);
+    // Only points on the axes: plotters' pixel arithmetic overflows far beyond them.
+    let keep = |&(px, py): &(f64, f64)| x.contains(&px) && py >= y.start && py <= y.end;
     for line in &panel.lines {
         let points: Vec<(f64, f64)> = line.points.iter().copied().filter(keep).collect();
         chart.draw_series(LineSeries::new(
@@ -332,6 +346,35 @@ mod tests {
         assert!(svg.contains("data term (log scale)") && svg.contains("μ = 0.02"));
         assert_eq!(svg.matches("<svg").count(), 1);
         assert!(grid("empty", &[panel(&[f64::NAN])], 2).unwrap().is_none());
+    }
+
+    /// Issue 33, item 6: values at and below the smallest normal number (`log.csv`'s
+    /// `data = 1e-310`) are drawn, not a tick loop that never ends.
+    #[test]
+    fn subnormal_and_tiny_values_are_drawn() {
+        for ys in [
+            &[1e-310, 1e-310][..],
+            &[1e-310, 2e-310, 3e-310],
+            &[0.0, 1e-310],
+            &[-1e-310, 1e-310],
+            &[1.0, 1e-310],
+            &[1e-100, 1.0],
+            &[1e-99, 1e99],
+            &[1e-300, 1e-310, 1e-320],
+            &[f64::MIN_POSITIVE, 5e-324],
+            &[5e-324],
+            &[1e300, -1e300],
+            &[f64::MAX, -f64::MAX],
+        ] {
+            let svg = grid("test", &[panel(ys)], 1).unwrap().unwrap();
+            assert!(svg.contains("data term"), "{ys:?}");
+            let counted = Counted {
+                label: "t = 0".into(),
+                values: ys,
+                colour: FIRST,
+            };
+            assert!(histogram("h", "mm", &[counted], 5).unwrap().is_some());
+        }
     }
 
     #[test]

@@ -338,3 +338,67 @@ fn a_checkpoint_with_any_byte_flipped_is_refused() {
     let o = medial(&["fit", s(&config), "--resume", s(&out), "--quiet"]);
     assert!(o.status.success(), "{}", text(&o.stderr));
 }
+
+/// Runs the binary with `args` for at most `seconds`; `None` when it had to be killed.
+fn within(args: &[&str], seconds: u64) -> Option<std::process::Output> {
+    let mut child = binary()
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed().as_secs() >= seconds {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            return None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    Some(child.wait_with_output().unwrap())
+}
+
+/// Item 6: `medial report` on a fit whose `log.csv` holds a subnormal value ends (it spun for
+/// ever in plotters' tick loop), and `medial template --atoms 100000000` fails at once.
+#[test]
+fn a_subnormal_log_value_and_a_huge_atom_count_end_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("out");
+    fit(&quick_config(d), &out);
+    let log = std::fs::read_to_string(out.join("log.csv")).unwrap();
+    let data = log
+        .lines()
+        .next()
+        .unwrap()
+        .split(',')
+        .position(|c| c == "data");
+    let data = data.expect("a data column");
+    let mut lines: Vec<String> = log.lines().map(str::to_owned).collect();
+    let last = lines.len() - 1;
+    let mut cells: Vec<&str> = lines[last].split(',').collect();
+    cells[data] = "1e-310";
+    lines[last] = cells.join(",");
+    std::fs::write(out.join("log.csv"), lines.join("\n") + "\n").unwrap();
+    let o = within(&["report", s(&out)], 60).expect("medial report hung");
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let start = std::time::Instant::now();
+    let o = within(
+        &[
+            "template",
+            s(&toy("template.vtk")),
+            "--no-fit",
+            "--atoms",
+            "100000000",
+            "--out",
+            s(&d.join("t.vtk")),
+        ],
+        60,
+    )
+    .expect("medial template hung");
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("--atoms") && err.contains("100000"), "{err}");
+    assert!(start.elapsed().as_secs() < 5, "{:?}", start.elapsed());
+}
