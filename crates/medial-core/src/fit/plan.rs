@@ -27,9 +27,9 @@ use crate::fit::optimize::ProgressRule;
 use crate::fit::prepare::Target;
 use crate::fit::spec::{AttachmentSpec, DiceSpec, FitSpec, FlowSettings, StageSpec, VarifoldSpec};
 use crate::flow::kernel::GaussianKernel;
+use crate::mesh::PrincipalAxes;
 use crate::model::template::MedialTemplate;
 use crate::model::Model;
-use crate::mesh::PrincipalAxes;
 use crate::{Error, Result, TriMesh, Vec3};
 use serde::Serialize;
 

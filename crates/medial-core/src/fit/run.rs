@@ -29,9 +29,9 @@ use crate::fit::stages::{run_stages, FitEvent, PlannedStage};
 use crate::flow::Flow;
 use crate::image::rasterize::voxel_dice;
 use crate::memory::MemoryLimit;
+use crate::mesh::PrincipalAxes;
 use crate::model::MedialTemplate;
 use crate::model::Model;
-use crate::mesh::PrincipalAxes;
 use crate::Result;
 use nalgebra::Matrix4;
 
