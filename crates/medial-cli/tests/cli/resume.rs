@@ -423,9 +423,13 @@ fn a_completed_fit_replaces_the_earlier_set_and_cleans_what_interrupted_runs_lef
     // What a killed run leaves.
     std::fs::create_dir_all(out.join(".medial-staging-1/flow")).unwrap();
     std::fs::write(out.join(".medial-staging-1/flow/boundary_t000.vtk"), "x").unwrap();
-    std::fs::write(out.join(".momenta_npy-Ab12Cd.tmp"), "x").unwrap();
-    std::fs::write(out.join("flow/.boundary_t003_vtk-Xy98Zw.tmp"), "x").unwrap();
-    std::fs::write(out.join("log.csv.part"), "x").unwrap();
+    std::fs::write(out.join(".medial-4194305-momenta_npy-Ab12Cd.tmp"), "x").unwrap();
+    std::fs::write(
+        out.join("flow/.medial-4194305-boundary_t003_vtk-Xy98Zw.tmp"),
+        "x",
+    )
+    .unwrap();
+    std::fs::write(out.join(".medial-4194305-log.csv.part"), "x").unwrap();
     let short = write_config(&dir.path().join("short"), 5, &one_stage());
     fit(&[s(&short), "--out", s(&out)]);
     let summary = complete_set(&out);
