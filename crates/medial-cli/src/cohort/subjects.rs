@@ -68,8 +68,10 @@ pub fn read(path: &Path, template: &Path) -> Result<Vec<Subject>, CliError> {
         .map_err(|e| bad(csv_message(&e)))?;
     let header = reader.headers().map_err(|e| bad(csv_message(&e)))?.clone();
     let columns = Columns::of(&header).map_err(bad)?;
-    let folder = std::path::absolute(path.parent().unwrap_or(Path::new("")))
-        .map_err(|e| CliError::io(path, e))?;
+    // A bare file name's folder is the current one ("" cannot be made absolute).
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty());
+    let folder =
+        std::path::absolute(parent.unwrap_or(Path::new("."))).map_err(|e| CliError::io(path, e))?;
     let template = std::path::absolute(template).map_err(|e| CliError::io(template, e))?;
     let mut subjects: Vec<Subject> = Vec::new();
     let mut seen: HashMap<String, u64> = HashMap::new();

@@ -402,3 +402,28 @@ fn a_subnormal_log_value_and_a_huge_atom_count_end_at_once() {
     assert!(err.contains("--atoms") && err.contains("100000"), "{err}");
     assert!(start.elapsed().as_secs() < 5, "{:?}", start.elapsed());
 }
+
+/// Item 10: `medial batch T.vtk subjects.csv …` with the table named without a folder (run
+/// from its folder) reads it ("cannot make an empty path absolute" before).
+#[test]
+fn a_subject_table_named_without_a_folder_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::copy(toy("target_boundary.vtk"), d.join("a.vtk")).unwrap();
+    std::fs::write(d.join("subjects.csv"), "subject,target\na,a.vtk\n").unwrap();
+    let o = binary()
+        .args([
+            "batch",
+            s(&toy("template.vtk")),
+            "subjects.csv",
+            "--out",
+            "cohort",
+            "--slurm",
+        ])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let script = std::fs::read_to_string(d.join("cohort/batch.sbatch")).unwrap();
+    assert!(script.contains(s(&d.join("subjects.csv"))), "{script}");
+}
