@@ -5,6 +5,7 @@ mod common;
 
 mod acceptance;
 mod apply;
+mod apply_exact;
 mod auto;
 mod bad_input;
 mod batch;

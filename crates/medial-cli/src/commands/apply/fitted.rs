@@ -1,5 +1,6 @@
 //! The map of a finished fit, read from its folder: the flow of space of its momenta
-//! ([`AmbientFlow`]) after its initial alignment, if it had one.
+//! ([`AmbientFlow`]) after its initial alignment and the projection that followed it, if it had
+//! them.
 
 use crate::config::Config;
 use crate::error::CliError;
@@ -17,6 +18,28 @@ const SAME_FIT_MM: f64 = 1e-6;
 /// An affine map and its inverse.
 type AffinePair = (Matrix4<f64>, Matrix4<f64>);
 
+/// The given template that an automatic fit writes beside its aligned template.
+const GIVEN_TEMPLATE: &str = "template.vtk";
+
+/// Meshes and point sets of more points than this are carried with the truncated kernel in
+/// blocks of nearby points ([`AmbientFlow::map_truncated`]) within [`POINTS_TOLERANCE_MM`].
+pub const EXACT_POINTS: usize = 20_000;
+
+/// The largest error (mm) of the truncated map of a large point set.
+pub const POINTS_TOLERANCE_MM: f64 = 1e-9;
+
+/// Which space the template side of the map is in.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum TemplateSpace {
+    /// The template the fit was given (`--template`, or the config's template).
+    #[default]
+    Given,
+    /// The template an automatic fit started its flow from, `DIR/aligned_template.vtk`
+    /// (after the initial alignment and the projection); the same as `given` for a fit with
+    /// a config.
+    Aligned,
+}
+
 /// What `apply` reads of `summary.json`.
 #[derive(Deserialize)]
 struct Listed {
@@ -25,9 +48,12 @@ struct Listed {
     files: Vec<String>,
 }
 
-/// The map of a fit: template space → subject space, `F = φ₁ ∘ A`, with `A` the initial
+/// The map of a fit: template space → subject space, `F = φ₁ ∘ P ∘ A`, with `A` the initial
 /// alignment of an automatic fit (`alignment.txt`, the template the fit started from being
-/// `aligned_template.vtk`) or the identity.
+/// `aligned_template.vtk`) or the identity, and `P` the projection after an affine `A`: the
+/// landmarks' moves from `A(given)` to `aligned_template.vtk`, extended to all of space by the
+/// kernel interpolation at the flow's σ ([`AmbientFlow::after_move`]), exact at the landmarks;
+/// `P` is part of `flow`.
 pub struct FittedMap {
     /// `A` and `A⁻¹`.
     alignment: Option<AffinePair>,
@@ -39,7 +65,10 @@ impl FittedMap {
     /// flow and the template), `momenta.npy`, and `alignment.txt` when the fit started from its
     /// `aligned_template.vtk`. The flow of the template is checked against the fit's
     /// `fitted_template.vtk`, so that a template changed since the fit is refused.
-    pub fn open(dir: &Path) -> Result<Self, CliError> {
+    ///
+    /// `space` says where the template side is: the given template's space (the map includes
+    /// `A` and `P`) or the aligned template's (`φ₁` alone).
+    pub fn open(dir: &Path, space: TemplateSpace) -> Result<Self, CliError> {
         let listed = complete_set(dir)?;
         if !matches!(listed.status.as_str(), "converged" | "budget") {
             tracing::warn!(
@@ -56,10 +85,58 @@ impl FittedMap {
         let momenta = read_momenta(&dir.join("momenta.npy"), flow.time_steps(), k)?;
         let trajectory = flow.shoot(model.landmarks(), &momenta)?;
         check_same_fit(dir, &config.model.template, trajectory.final_positions())?;
+        let ambient = AmbientFlow::new(&flow, &trajectory, &momenta)?;
+        let alignment = match space {
+            TemplateSpace::Aligned => None,
+            TemplateSpace::Given => alignment(dir, &config.model.template)?,
+        };
+        let Some((a, a_inverse)) = alignment else {
+            return Ok(Self {
+                alignment: None,
+                flow: ambient,
+            });
+        };
+        let given = dir.join(GIVEN_TEMPLATE);
+        let flow = if given.is_file() {
+            let given_model = medial_io::model::read_model(&given)?;
+            if given_model.landmarks().len() != k {
+                return Err(CliError::Input(format!(
+                    "{} has {} landmarks, the fit's template {k}",
+                    given.display(),
+                    given_model.landmarks().len()
+                )));
+            }
+            let from = medial_core::mesh::carry_points(given_model.landmarks(), &a);
+            ambient
+                .after_move(&from, model.landmarks())
+                .map_err(|e| CliError::Input(format!("{}: {e}", given.display())))?
+        } else {
+            tracing::warn!(
+                "{} has no {GIVEN_TEMPLATE} (a fit by an earlier release): the map includes the \
+                 initial alignment but not the projection that may have followed it",
+                dir.display()
+            );
+            ambient
+        };
         Ok(Self {
-            alignment: alignment(dir, &config.model.template)?,
-            flow: AmbientFlow::new(&flow, &trajectory, &momenta)?,
+            alignment: Some((a, a_inverse)),
+            flow,
         })
+    }
+
+    /// The flow of space after the alignment (the projection's move included).
+    pub fn flow(&self) -> &AmbientFlow {
+        &self.flow
+    }
+
+    /// `A`, if the map has an initial alignment.
+    pub fn alignment(&self) -> Option<&Matrix4<f64>> {
+        self.alignment.as_ref().map(|(a, _)| a)
+    }
+
+    /// `A⁻¹`, if the map has an initial alignment.
+    pub fn alignment_inverse(&self) -> Option<&Matrix4<f64>> {
+        self.alignment.as_ref().map(|(_, a)| a)
     }
 
     /// `F(x)` (without `inverse`) or `F⁻¹(y)` of every point.
@@ -69,11 +146,20 @@ impl FittedMap {
                 .map(|x| m.transform_point(&(*x).into()).coords)
                 .collect()
         };
+        let flow = |p: &[Vec3], inverse: bool| -> Result<Vec<Vec3>, CliError> {
+            Ok(match (p.len() > EXACT_POINTS, inverse) {
+                (false, false) => self.flow.forward(p)?,
+                (false, true) => self.flow.inverse(p)?,
+                (true, _) => {
+                    let epsilon = self.flow.truncation_for(POINTS_TOLERANCE_MM);
+                    self.flow.map_truncated(p, inverse, epsilon, 256)?
+                }
+            })
+        };
         Ok(match (&self.alignment, inverse) {
-            (None, false) => self.flow.forward(points)?,
-            (None, true) => self.flow.inverse(points)?,
-            (Some((a, _)), false) => self.flow.forward(&by(a, points))?,
-            (Some((_, a_inv)), true) => by(a_inv, &self.flow.inverse(points)?),
+            (None, _) => flow(points, inverse)?,
+            (Some((a, _)), false) => flow(&by(a, points), false)?,
+            (Some((_, a_inv)), true) => by(a_inv, &flow(points, true)?),
         })
     }
 }
