@@ -97,7 +97,7 @@ pub fn check_destination(path: &Path) -> Result<()> {
     };
     Err(Error::format(
         path,
-        &format!(
+        format!(
             "is {what}, not a regular file: refused to replace it by an output (give the path \
              of a file)"
         ),

@@ -46,7 +46,7 @@ const VOXELS_PER_RADIUS: f64 = 3.0;
 /// the coarse grid).
 const THIN_PERCENTILE: f64 = 0.10;
 /// Grid margin around the shape, voxels.
-const MARGIN_VOXELS: f64 = 3.0;
+pub const MARGIN_VOXELS: f64 = 3.0;
 /// Voxels along the longest side of a mesh's first, coarse grid.
 const COARSE_VOXELS: f64 = 96.0;
 /// The Dice of a template against its shape that counts as matching it.

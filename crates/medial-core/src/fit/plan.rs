@@ -61,12 +61,12 @@ pub struct FitPlan {
 
 /// AL iterations of the constrained SSD fit to the warped boundary (μ = 20 … 20000 in relative
 /// constraint units: on cmrep's t001 about the weight of μ = 1 … 1000 in mm²).
-const BOUNDARY_AL_ITERATIONS: usize = 4;
+pub const BOUNDARY_AL_ITERATIONS: usize = 4;
 
 /// AL iterations of the paper's Dice stage: μ = 0.02 … 2000 in relative units, about the
 /// paper's 0.001 … 100 in mm² on cmrep's t001 and one step further, so that the constraints end
 /// well inside their tolerance.
-const DICE_AL_ITERATIONS: usize = 6;
+pub const DICE_AL_ITERATIONS: usize = 6;
 
 impl FitPlan {
     /// The paper's schedule: SSD towards the affine part (μ = 20, one AL iteration; the
@@ -155,13 +155,13 @@ struct FirstIteration {
 
 /// Time steps of an automatic fit: the flow's strain per step stays below the guard's limit on
 /// every measured case at 10, and each halving of N halves the cost of an evaluation.
-const TIME_STEPS: usize = 10;
+pub const TIME_STEPS: usize = 10;
 
 /// Coarse to fine in time: the first AL iterations of image and point fits run in 5 steps while
 /// the flow strains space by at most 0.5 per step ([`CoarseTime`]); they shape the fit at half
 /// the cost, the last AL iterations in [`TIME_STEPS`] make it exact. Not for surfaces (their
 /// later stages are on their budgets already).
-const COARSE_TIME_STEPS: usize = 5;
+pub const COARSE_TIME_STEPS: usize = 5;
 
 /// Against an image (Dice): μ = 2 … 20000 over 5 AL iterations of 120 L-BFGS iterations, the
 /// first up to 600 while it makes 1 % progress per 40; three of them coarse. A small first μ
@@ -238,17 +238,17 @@ const FIRST_PROGRESS: FirstIteration = FirstIteration {
 /// The kernel width of an automatic fit against [`Geometry::sigma`] (the mean spoke length, at
 /// least half the mean boundary edge): a kernel narrower than the wall lets medial and boundary
 /// points move apart as the constraints need.
-const SIGMA_FACTOR: f64 = 0.55;
+pub const SIGMA_FACTOR: f64 = 0.55;
 
 /// The kernel tolerance ε of an automatic fit that truncates its kernel: the sums then err by
 /// at most 1e-10 of the sums of absolute terms (docs/method.md §2.3), far below what a fit can
 /// tell.
-const KERNEL_TOLERANCE: f64 = 1e-10;
+pub const KERNEL_TOLERANCE: f64 = 1e-10;
 
 /// An automatic fit truncates its kernel when at most this fraction of the template's landmark
 /// pairs lie within the cutoff radius `r = σ √(2 ln(1/ε))`: the truncated sweep's cell grid
 /// and chunk masks cost more than they skip when most pairs are near.
-const TRUNCATE_AT_MOST: f64 = 0.2;
+pub const TRUNCATE_AT_MOST: f64 = 0.2;
 
 /// `kernel_tolerance` of an automatic fit with kernel width `sigma` (mm) of a template with
 /// landmarks `landmarks`: [`KERNEL_TOLERANCE`] when at most [`TRUNCATE_AT_MOST`] of their pairs
@@ -265,7 +265,7 @@ pub fn kernel_tolerance(sigma: f64, landmarks: &[Vec3]) -> f64 {
 }
 
 /// The second varifold stage's kernel width, as a fraction of the first's.
-const FINE_WIDTH_FRACTION: f64 = 0.25;
+pub const FINE_WIDTH_FRACTION: f64 = 0.25;
 
 /// The varifold kernel widths (mm) of an automatic fit to the surface `target`: first
 /// [`default_width`] (a tenth of its bounding-box diagonal, at least two mean edges), then
@@ -282,7 +282,7 @@ pub fn varifold_widths(boundary: &TriMesh, target: &TriMesh) -> Result<(f64, f64
 /// width `sigma`: σ, at least half the second's and at most the second's. The flow cannot
 /// follow a varifold much narrower than its own kernel without pulling its boundary points
 /// apart.
-fn finest_width(fine: f64, sigma: f64) -> f64 {
+pub fn finest_width(fine: f64, sigma: f64) -> f64 {
     sigma.max(0.5 * fine).min(fine)
 }
 
@@ -290,19 +290,19 @@ fn finest_width(fine: f64, sigma: f64) -> f64 {
 /// iterations end early once the attachment changes by less than 0.1 % over one: the
 /// constraints are then well inside their tolerance and tightening them no longer moves the
 /// fit.
-const SETTLE_CONSTRAINT: f64 = 1e-3;
+pub const SETTLE_CONSTRAINT: f64 = 1e-3;
 
 /// A constrained automatic stage that ends its schedule with `max |C|` above this (relative
 /// units: about 0.3° and 0.5 %, half the tolerance of a fit) goes on for up to
 /// [`EXTEND_AT_MOST`] more AL iterations while each at least halves it ([`Extend`]): the budget
 /// is there to finish the job, not to end it; a schedule that stalls ends.
-const EXTEND_ABOVE: f64 = 5e-3;
+pub const EXTEND_ABOVE: f64 = 5e-3;
 
 /// Most AL iterations an automatic stage adds ([`EXTEND_ABOVE`]).
-const EXTEND_AT_MOST: usize = 4;
+pub const EXTEND_AT_MOST: usize = 4;
 
 /// The attachment's relative change over an AL iteration at most which it has settled.
-const SETTLE_DATA_CHANGE: f64 = 1e-3;
+pub const SETTLE_DATA_CHANGE: f64 = 1e-3;
 
 /// A stage with the medial constraints in relative units, μ rising tenfold over the AL
 /// iterations of `schedule`, ending early once they settle ([`SETTLE_CONSTRAINT`]).
@@ -372,7 +372,7 @@ impl Geometry {
     /// the flow can move medial and boundary points apart as the constraints need), at least
     /// half the mean edge length (neighbouring landmarks move together), at most an eighth of
     /// the long extent (the upper bound wins), mm.
-    fn sigma(&self) -> f64 {
+    pub fn sigma(&self) -> f64 {
         self.mean_spoke_mm
             .max(self.mean_edge_mm / 2.0)
             .min(self.long_extent_mm / 8.0)
@@ -419,10 +419,10 @@ pub fn plain_sigma(mesh: &TriMesh, axes: &PrincipalAxes) -> f64 {
 /// The kinetic weight of a plain mesh's automatic fit: with no constraints to hold the wall,
 /// the kinetic energy is what keeps the flow smooth (at the medial templates' 0.005 a varifold
 /// fit of the reduced KeOps hippocampus folds a triangle).
-const PLAIN_KINETIC_WEIGHT: f64 = 0.05;
+pub const PLAIN_KINETIC_WEIGHT: f64 = 0.05;
 
 /// L-BFGS iterations of the one unconstrained stage of an automatic fit of a plain mesh.
-const PLAIN_ITERATIONS: usize = 300;
+pub const PLAIN_ITERATIONS: usize = 300;
 
 /// The automatic fit of `model` (before its initial alignment) to `target`:
 ///

@@ -19,7 +19,7 @@
 //! [`TARGET_SUBDIVISIONS`] times (so that the smooth warp bends its triangles), carried by the
 //! case's [`Warp`]: a twist and a bend about the shape's long axis (z) followed by an affine map.
 //!
-//! Any other template becomes a case the same way: [`PrincipalAxes::of`] its points gives the
+//! Any other template becomes a case the same way: [`PrincipalAxes::of`](crate::mesh::PrincipalAxes::of) its points gives the
 //! frame of the twist and bend (long axis z, thickness direction x), [`Warp::bending`] the warp,
 //! and [`target_boundary`], [`target_surface`] and [`target_image`] the targets.
 //! [`parameter_grid`] triangulates the parameter rectangle of a new analytic sheet.

@@ -21,7 +21,7 @@
 //!
 //! Where the radius is too large for the curvature of the sheet, or for the angle between the
 //! sheets at a seam, inflation lowers it locally and smoothly (the rule and its reason are in
-//! [`limit`](self::limit) and `docs/decisions/0400-inflation-radius-limit.md`) and reports where
+//! `limit` and `docs/decisions/0400-inflation-radius-limit.md`) and reports where
 //! and by how much in [`Inflated::limit`]; a fit to a shape restores the thickness. Inflation
 //! refuses to return a boundary that is open, non-manifold, inward oriented or, after the
 //! limits, self-intersecting, and says near which medial vertices the problem is.
@@ -80,7 +80,7 @@ impl Inflated {
 
 /// Inflates a medial sheet into a boundary mesh with one boundary vertex per (medial vertex,
 /// region); see the module documentation for the gluing rules and spoke directions, and
-/// [`limit`](self::limit) for where the radius is lowered.
+/// `limit` for where the radius is lowered.
 ///
 /// Errors (`InvalidTemplate`, naming the medial vertices or triangles involved): a triangle with
 /// two or three free edges (its sides would collapse), a radius gradient `|∇r| ≥ 1` inside a
