@@ -726,6 +726,14 @@ fn judge_flow(
             Some(format!("time point {n} of the fitted flow: {cause}"))
         });
     }
+    if last.unsound.is_none() && last.figures.voxel_dice.is_some_and(|d| d <= 0.0) {
+        // No overlap at all is no fit, whatever the optimiser's progress rule said (issue 33).
+        last.unsound = Some(
+            "the fitted model overlaps no foreground voxel of the image (voxel Dice 0): check \
+             the template's scale and position against the image"
+                .into(),
+        );
+    }
     if let (Some(true), Some(worst)) = (last.constraints_met, time_points::over_time(points)) {
         last.constraints_met = Some(
             worst.max_spoke_normal_deg <= cfg.tolerance_deg

@@ -86,7 +86,36 @@ pub fn read_affine_as(path: &Path, convention: Convention) -> Result<Affine3<f64
             Convention::Lps => flip_lps_ras(&m),
         }
     };
+    regular(&m).map_err(|m| Error::format(path, m))?;
     Ok(Affine3::from_matrix_unchecked(m))
+}
+
+/// The least and the most a map may scale a direction (mm per mm): a map outside shrinks or
+/// magnifies a direction a millionfold, carrying a template of centimetres below a
+/// nanometre or beyond a kilometre, which no registration of anatomy means.
+const SCALE_LIMITS: (f64, f64) = (1e-6, 1e6);
+
+/// The largest ratio of the most to the least a map scales a direction (its linear part's
+/// condition number): beyond, it is singular to within rounding.
+const MAX_CONDITION: f64 = 1e8;
+
+/// `Err` for a map whose linear part is singular, or nearly so in a way that does not depend
+/// on its scale alone: its singular values beyond [`SCALE_LIMITS`] or their ratio beyond
+/// [`MAX_CONDITION`] (a determinant test alone accepts a map scaled by 1e-12, which carries
+/// every point onto one). Reflections are the caller's to judge.
+fn regular(m: &Matrix4<f64>) -> std::result::Result<(), String> {
+    let linear = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let sv = linear.singular_values();
+    let (least, most) = (sv.min(), sv.max());
+    let within = least >= SCALE_LIMITS.0 && most <= SCALE_LIMITS.1;
+    if within && most <= MAX_CONDITION * least {
+        return Ok(());
+    }
+    Err(format!(
+        "the map is singular or nearly so: it scales directions by {least:.3e} to {most:.3e} \
+         (each must lie within {:.0e} to {:.0e}, their ratio at most {MAX_CONDITION:.0e})",
+        SCALE_LIMITS.0, SCALE_LIMITS.1
+    ))
 }
 
 /// The transform types of an ITK file read by [`itk_matrix`].
@@ -105,6 +134,17 @@ fn itk_matrix(text: &str) -> std::result::Result<Matrix4<f64>, String> {
             .map(str::trim)
             .ok_or_else(|| format!("ITK transform file without a '{key}' line"))
     };
+    let transforms = text
+        .lines()
+        .filter(|l| l.trim().starts_with("Transform:"))
+        .count();
+    if transforms > 1 {
+        return Err(format!(
+            "the ITK transform file holds {transforms} transforms; only a file of one affine \
+             transform is read (ITK applies a file's transforms as a stack): compose them into \
+             one first (e.g. antsApplyTransforms -t … -o Linear[out.txt])"
+        ));
+    }
     let kind = field("Transform:")?;
     if !ITK_AFFINE_TYPES.contains(&kind) {
         return Err(format!(
@@ -202,6 +242,42 @@ mod tests {
         assert!(itk_matrix(&euler).unwrap_err().contains("Euler3DTransform"));
         let short = text.replace(" 1 2 3\n", "\n");
         assert!(itk_matrix(&short).unwrap_err().contains("12"));
+    }
+
+    /// Issue 33, item 8: a map scaled by 1e-12 (positive determinant 1e-36) and a rank-2 map
+    /// are singular; a second ITK transform in a file is refused, not ignored.
+    #[test]
+    fn singular_maps_and_a_second_itk_transform_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.txt");
+        let read = |text: &str| {
+            std::fs::write(&path, text).unwrap();
+            read_affine(&path)
+        };
+        assert!(read("2 0 0 1 0 3 0 2 0 0 0.5 3 0 0 0 1").is_ok());
+        for text in [
+            "1e-12 0 0 0 0 1e-12 0 0 0 0 1e-12 0 0 0 0 1",
+            "1 0 0 0 0 1 0 0 0 0 0 0 0 0 0 1",
+            "1 0 0 0 0 1 0 0 1 1 1e-12 0 0 0 0 1",
+            "1e7 0 0 0 0 1e7 0 0 0 0 1e7 0 0 0 0 1",
+        ] {
+            let message = read(text).unwrap_err().to_string();
+            assert!(
+                message.contains("singular") && message.contains("m.txt"),
+                "{message}"
+            );
+        }
+        let one = "#Insight Transform File V1.0\n#Transform 0\nTransform: \
+                   AffineTransform_double_3_3\nParameters: 1 0 0 0 1 0 0 0 1 1 2 3\n\
+                   FixedParameters: 0 0 0\n";
+        assert!(read(one).is_ok());
+        let two = format!(
+            "{one}{}",
+            one.replace("#Insight Transform File V1.0\n", "")
+                .replace("#Transform 0", "#Transform 1")
+        );
+        let message = read(&two).unwrap_err().to_string();
+        assert!(message.contains("holds 2 transforms"), "{message}");
     }
 
     #[test]

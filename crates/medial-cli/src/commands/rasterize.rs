@@ -62,8 +62,20 @@ pub fn run(args: &RasterizeArgs) -> Result<(), CliError> {
     };
     memory::check_grid(dims)?;
     let mask = rasterize(&mesh, dims, voxel_to_world).map_err(|e| model_error(&args.mesh, e))?;
-    write_nifti(&args.out, &mask, NiftiType::U8)?;
     let inside = mask.data().iter().filter(|&&v| v > 0.0).count();
+    if inside == 0 {
+        // An empty mask is no picture of the mesh (issue 33): refused, nothing written.
+        return Err(CliError::Input(format!(
+            "{}: the mesh encloses no voxel centre of the {}×{}×{} grid: it has no volume \
+             (degenerate: coincident or coplanar points) or lies outside the grid; no mask \
+             written",
+            args.mesh.display(),
+            dims[0],
+            dims[1],
+            dims[2]
+        )));
+    }
+    write_nifti(&args.out, &mask, NiftiType::U8)?;
     let spacing = mask.spacing();
     print_json(&RasterizeSummary {
         dims: mask.dims(),

@@ -3,7 +3,7 @@
 //! regular files, damaged checkpoints refused, no hang, meaningless results never exit 0, and
 //! a commit that a SIGKILL at any instant leaves with the old or the new set whole.
 
-use crate::common::{s, text};
+use crate::common::{one_line_error, s, text};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -426,4 +426,89 @@ fn a_subject_table_named_without_a_folder_is_read() {
     assert!(o.status.success(), "{}", text(&o.stderr));
     let script = std::fs::read_to_string(d.join("cohort/batch.sbatch")).unwrap();
     assert!(script.contains(s(&d.join("subjects.csv"))), "{script}");
+}
+
+/// The toy template with its points, radii and medial points scaled by `factor` (about the
+/// origin), written to `path`.
+fn scaled_toy(path: &Path, factor: f64) {
+    let text = std::fs::read_to_string(toy("template.vtk")).unwrap();
+    let mut scaling = false;
+    let mut out = String::new();
+    for line in text.lines() {
+        let head = line.split_whitespace().next().unwrap_or("");
+        if head.chars().next().is_some_and(|c| c.is_ascii_alphabetic()) {
+            scaling = ["POINTS", "Radius", "MedialPoint"].contains(&head);
+            out += line;
+        } else if scaling {
+            let cells: Vec<String> = line
+                .split_whitespace()
+                .map(|v| format!("{:e}", v.parse::<f64>().unwrap() * factor))
+                .collect();
+            out += &cells.join(" ");
+        } else {
+            out += line;
+        }
+        out.push('\n');
+    }
+    std::fs::write(path, out).unwrap();
+}
+
+/// Item 8: results the tool can tell are meaningless are never exit 0: a Dice fit of the toy
+/// scaled by 1e-6 (voxel Dice 0), a degenerate mesh rasterized (an empty mask), an SSD
+/// transform scaled by 1e-12, an ITK file of two transforms.
+#[test]
+fn meaningless_results_are_never_exit_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let tiny = d.join("tiny.vtk");
+    scaled_toy(&tiny, 1e-6);
+    let config = d.join("dice.toml");
+    let stage = |keys: &str| {
+        format!(
+            "[model]\ntemplate = {:?}\n\n[flow]\nsigma = 2.0\ntime_steps = 5\n\
+             kinetic_weight = 0.005\n\n[output]\nevery_time_point = false\n\n[[stage]]\n\
+             name = \"s\"\n{keys}\nmu = 20.0\nal_iterations = 1\nmax_iterations = 5\n",
+            s(&tiny)
+        )
+    };
+    let dice = format!(
+        "attachment = \"dice\"\nimage = {:?}",
+        s(&toy("target.nii.gz"))
+    );
+    std::fs::write(&config, stage(&dice)).unwrap();
+    let o = medial(&["fit", s(&config), "--out", s(&d.join("fit")), "--quiet"]);
+    let err = text(&o.stderr);
+    assert!(!o.status.success(), "a fit to voxel Dice 0 exited 0");
+    assert!(err.contains("Dice 0") || err.contains("overlap"), "{err}");
+    // A mesh of coincident points.
+    let flat = d.join("flat.vtk");
+    let mesh = "# vtk DataFile Version 4.2\nflat\nASCII\nDATASET POLYDATA\nPOINTS 4 double\n\
+                1 1 1 1 1 1 1 1 1 1 1 1\nPOLYGONS 4 16\n3 0 1 2\n3 0 2 3\n3 0 3 1\n3 1 3 2\n";
+    std::fs::write(&flat, mesh).unwrap();
+    let (mask, like) = (d.join("mask.nii.gz"), toy("target.nii.gz"));
+    let args = ["rasterize", s(&flat), "--like", s(&like), "--out", s(&mask)];
+    let line = one_line_error(&args, 1, &["flat.vtk", "no voxel"]);
+    assert!(!mask.exists(), "{line}");
+    // Transforms: scaled by 1e-12, and an ITK file of two.
+    let small = d.join("small.txt");
+    std::fs::write(&small, "1e-12 0 0 0\n0 1e-12 0 0\n0 0 1e-12 0\n0 0 0 1\n").unwrap();
+    let one = "#Transform 0\nTransform: AffineTransform_double_3_3\n\
+               Parameters: 1 0 0 0 1 0 0 0 1 0 0 0\nFixedParameters: 0 0 0\n";
+    let itk = d.join("two.txt");
+    let two = format!(
+        "#Insight Transform File V1.0\n{one}{}",
+        one.replace("#Transform 0", "#Transform 1")
+    );
+    std::fs::write(&itk, two).unwrap();
+    let ssd = d.join("ssd");
+    for (path, needle) in [(&small, "singular"), (&itk, "holds 2 transforms")] {
+        let keys = format!("attachment = \"ssd\"\ntransform = {:?}", s(path));
+        std::fs::write(
+            &config,
+            stage(&keys).replace(s(&tiny), s(&toy("template.vtk"))),
+        )
+        .unwrap();
+        let args = ["fit", s(&config), "--out", s(&ssd), "--quiet"];
+        one_line_error(&args, 1, &[s(path), needle]);
+    }
 }
