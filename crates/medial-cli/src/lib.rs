@@ -76,6 +76,7 @@ const STACK_BYTES: usize = 8 << 20;
 /// tasks, instead of handing each one to the pool from outside and sleeping until it is done
 /// (see the README's Performance section).
 fn run(cli: Cli) -> Result<(), CliError> {
+    signals::survive_file_size_limit()?;
     memory::set_limit(cli.max_memory);
     let threads = configure_threads(cli.threads)?;
     rayon::scope(|_| commands::run(cli.command, threads, cli.quiet))

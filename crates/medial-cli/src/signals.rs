@@ -55,3 +55,19 @@ impl Signals {
         }
     }
 }
+
+/// Makes SIGXFSZ harmless for the rest of the process: a write beyond the file-size limit
+/// (`ulimit -f`) then fails with `EFBIG` ("File too large"), which ends the command with a
+/// one-line error naming the file (its temporary file removed, the earlier file intact),
+/// instead of the signal killing the process mid-write (issue 33). A handler that does
+/// nothing is installed (it survives nothing the signal's default would not: an ignored
+/// signal and a caught one both make the write fail instead).
+pub fn survive_file_size_limit() -> Result<(), CliError> {
+    #[cfg(unix)]
+    {
+        let flag = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        signal_hook::flag::register(signal_hook::consts::SIGXFSZ, flag)
+            .map_err(|e| CliError::Input(format!("cannot handle SIGXFSZ: {e}")))?;
+    }
+    Ok(())
+}

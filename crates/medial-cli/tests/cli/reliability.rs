@@ -512,3 +512,24 @@ fn meaningless_results_are_never_exit_0() {
         one_line_error(&args, 1, &[s(path), needle]);
     }
 }
+
+/// Item 7: under a file-size limit (`ulimit -f`), a write beyond it is a one-line error
+/// naming the file, not death by SIGXFSZ.
+#[test]
+fn a_file_size_limit_is_an_error_not_a_signal() {
+    let dir = tempfile::tempdir().unwrap();
+    let mask = dir.path().join("mask.nii");
+    let bin = std::env::var("MEDIAL_UNDER_TEST").unwrap_or(env!("CARGO_BIN_EXE_medial").into());
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg("ulimit -f 4 && exec \"$0\" \"$@\"")
+        .args([&bin, "rasterize", s(&toy("template.vtk"))])
+        .args(["--spacing", "0.3", "--out", s(&mask)])
+        .output()
+        .unwrap();
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "killed by a signal? {o:?}");
+    assert!(err.starts_with("error: ") && err.contains("mask"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(!mask.exists());
+}
