@@ -79,15 +79,19 @@ pub fn prepare(
             template,
         },
         medial_core::Error::Memory {
-            what,
-            estimate,
-            limit,
+            estimate, limit, ..
         } => CliError::Memory {
-            what: format!("stage '{}': {what}", stage.name),
+            what: format!("stage '{}'", stage.name),
             estimate,
             limit,
         },
-        medial_core::Error::PointCount { .. } => {
+        // About the stage's settings or the template, not its file.
+        e @ (medial_core::Error::Setting { .. }
+        | medial_core::Error::NeedsMedial(_)
+        | medial_core::Error::WrongTarget { .. }) => {
+            CliError::Input(format!("stage '{}': {e}", stage.name))
+        }
+        e => {
             let file = file.as_deref().map(|p| format!("{}: ", p.display()));
             CliError::Input(format!(
                 "stage '{}': {}{e}",
@@ -95,7 +99,6 @@ pub fn prepare(
                 file.unwrap_or_default()
             ))
         }
-        e => CliError::Input(format!("stage '{}': {e}", stage.name)),
     })
 }
 

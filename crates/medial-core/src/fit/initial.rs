@@ -46,9 +46,11 @@ use nalgebra::Matrix4;
 /// projection's own tolerance can tell.
 pub const AFFINE_ANISOTROPY: f64 = 0.01;
 
-/// The largest landmark move of the projection that follows an affine map, as a fraction of the
-/// template's mean spoke length (its half thickness): an affine map is taken only where the
-/// projection follows it with small moves. A move of a quarter of the spoke reshapes the
+/// The largest landmark move of the projection that follows an affine map found from the
+/// moments of filled shapes (an image, a rasterized surface), as a fraction of the template's
+/// mean spoke length (its half thickness): such a map is taken only where the projection
+/// follows it with small moves. (A least-squares affine map between corresponding points is
+/// the shape's own change and is always followed.) A move of a quarter of the spoke reshapes the
 /// boundary–medial prisms by as much, and an anisotropic map that needs it is mostly fitting
 /// the wall's thickness (which the flow follows, thickening the wall along its normals) rather
 /// than the shape's extent (which the similarity has matched).
@@ -69,8 +71,11 @@ pub struct InitialAlignment {
     /// One line per step, with its figures (scale, anisotropy, overlap or distance before and
     /// after).
     pub notes: Vec<String>,
-    /// Against an image: how much thicker the foreground is than the template carried by the
-    /// similarity ([`crate::fit::align::Alignment::thickness_ratio`]).
+    /// Against an image (or a rasterized surface): how much thicker the foreground is than the
+    /// template carried by the similarity
+    /// ([`crate::fit::align::Alignment::thickness_ratio`]). Its presence also says that the map
+    /// comes from the moments of filled shapes, which confound a wall's thickness with the
+    /// shape's extent (corresponding points do not).
     pub thickness_ratio: Option<f64>,
 }
 
