@@ -243,7 +243,9 @@ pub fn align_template(
         let spoke = mean_spoke(template) * crate::fit::align::Alignment::scale_of(&matrix);
         match project(&carried, &options) {
             Ok(projection)
-                if affine && projection.max_displacement > MAX_PROJECTION_MOVE * spoke =>
+                if affine
+                    && alignment.thickness_ratio.is_some()
+                    && projection.max_displacement > MAX_PROJECTION_MOVE * spoke =>
             {
                 notes.push(format!(
                     "the initial affine map (anisotropy {:.1} %) needs the projection to move \
