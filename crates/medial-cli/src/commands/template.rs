@@ -119,6 +119,11 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
         (None, Some(s)) => Sampling::Spacing(s),
         (None, None) => Sampling::Atoms(DEFAULT_ATOMS),
     };
+    // The output's folder exists before the work starts, so that a missing one is not found
+    // only at the end.
+    if let Some(folder) = args.out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(folder).map_err(|e| CliError::io(folder, e))?;
+    }
     let shape = read_shape(args)?;
     if shape.bounds().is_err() {
         return Err(CliError::Input(match shape {

@@ -66,7 +66,9 @@ fn assert_targets(figures: &Value) {
 fn a_template_of_the_synthetic_cup_meets_the_targets() {
     let dir = tempfile::tempdir().unwrap();
     let mask = cup_mask(dir.path());
-    let out = dir.path().join("template.vtk");
+    // The template's folder need not exist: it is made (before the work, not found missing
+    // at its end).
+    let out = dir.path().join("templates/cup/template.vtk");
     let sheet = dir.path().join("sheet.vtk");
     let figures = run_json(&[
         "template",
