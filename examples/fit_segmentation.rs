@@ -21,7 +21,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     // The plan (kernel width, time steps, μ schedule, image smoothing) and the initial
     // alignment, chosen from the template and the image.
-    let start = automatic(&Model::Medial(Box::new(template)), &target)?;
+    let start = automatic(
+        &Model::Medial(Box::new(template)),
+        &target,
+        MemoryLimit::none(),
+    )?;
     for note in &start.notes {
         println!("{note}");
     }

@@ -143,14 +143,20 @@ fn automatic(inputs: &Inputs, out: &Path) -> Result<Resolved, CliError> {
         .expect("clap requires --template without a config");
     let model = medial_io::model::read_model(template_path)?;
     let (target, source) = read_automatic_target(inputs, &model, template_path)?;
-    let start = medial_core::fit::run::automatic(&model, &target).map_err(|e| match e {
-        medial_core::Error::NoCorrespondence { explained, minimum } => CliError::NoCorrespondence {
-            path: source_path(&source).to_path_buf(),
-            explained,
-            minimum,
-        },
-        e => model_error(source_path(&source), e),
-    })?;
+    let start =
+        medial_core::fit::run::automatic(&model, &target, crate::memory::limit()).map_err(|e| {
+            match e {
+                medial_core::Error::NoCorrespondence { explained, minimum } => {
+                    CliError::NoCorrespondence {
+                        path: source_path(&source).to_path_buf(),
+                        explained,
+                        minimum,
+                    }
+                }
+                e @ medial_core::Error::Memory { .. } => CliError::from(e),
+                e => model_error(source_path(&source), e),
+            }
+        })?;
     for note in &start.notes {
         tracing::info!("{note}");
     }

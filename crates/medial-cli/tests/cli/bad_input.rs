@@ -175,6 +175,41 @@ fn shifted_target(path: &Path, shift: Vector3<f64>) {
     write_nifti(path, &volume, NiftiType::U8).unwrap();
 }
 
+/// An image of very anisotropic voxels is small, the template rasterized at its smallest voxel
+/// for the automatic alignment's moments is not: refused by the memory limit with one line,
+/// before allocating (it once aborted the process on a failed allocation), nothing written.
+#[test]
+fn the_automatic_alignment_grid_is_within_the_memory_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let image = dir.path().join("anisotropic.nii.gz");
+    let dims = [3000, 5, 70];
+    let to_world = Matrix4::new_nonuniform_scaling(&Vector3::new(0.01, 10.0, 0.5))
+        .append_translation(&Vector3::new(-15.0, -20.0, -17.0));
+    let voxels: usize = dims.iter().product();
+    let volume = Volume::new(dims, vec![1.0; voxels], to_world).unwrap();
+    write_nifti(&image, &volume, NiftiType::U8).unwrap();
+    let out = dir.path().join("out");
+    one_line_error(
+        &[
+            "fit",
+            "--template",
+            s(&toy("template.vtk")),
+            "--image",
+            s(&image),
+            "--out",
+            s(&out),
+            "--max-memory",
+            "4",
+        ],
+        1,
+        &[
+            "the initial alignment's grid of 0.010 mm voxels",
+            "more than the memory limit of 4.0 GiB",
+        ],
+    );
+    assert!(!out.exists());
+}
+
 #[test]
 fn dice_image_off_the_template_is_refused_with_both_boxes() {
     let dir = tempfile::tempdir().unwrap();

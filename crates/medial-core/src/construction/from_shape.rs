@@ -381,7 +381,7 @@ fn fit_to_shape(
         volume: mask.clone(),
         label: None,
     };
-    let start = automatic(&Model::Medial(Box::new(template.clone())), &target)?;
+    let start = automatic(&Model::Medial(Box::new(template.clone())), &target, memory)?;
     let fit = start.fit(target, memory)?;
     let outcomes = fit.run(|_| {})?;
     let last = outcomes.last().expect("a fit has a stage");

@@ -17,11 +17,12 @@
 //! ```
 //! use medial_core::fit::initial::{align_template, initial_alignment};
 //! use medial_core::fit::Target;
+//! use medial_core::memory::MemoryLimit;
 //! use medial_core::synth::{Shape, SyntheticCase};
 //! let case = SyntheticCase::build(Shape::Toy).unwrap();
 //! let boundary = case.template().boundary_mesh().unwrap();
 //! let target = Target::Points(case.target_boundary().unwrap().points().to_vec());
-//! let alignment = initial_alignment(&boundary, &target, 1.0).unwrap();
+//! let alignment = initial_alignment(&boundary, &target, 1.0, MemoryLimit::none()).unwrap();
 //! let aligned = align_template(case.template(), &alignment).unwrap();
 //! assert_eq!(aligned.template.landmark_count(), case.template().landmark_count());
 //! ```
@@ -34,6 +35,7 @@ use crate::fit::align::{
 use crate::fit::prepare::Target;
 use crate::image::rasterize::{grid_around, rasterize};
 use crate::image::volume::Volume;
+use crate::memory::{Estimate, MemoryLimit};
 use crate::mesh::carry_points;
 use crate::mesh::topology::{check_closed_oriented_manifold, check_outward};
 use crate::model::constraints::MedialConstraints;
@@ -96,17 +98,37 @@ impl InitialAlignment {
 }
 
 /// The initial map of the template boundary `boundary` onto `target` (see the module doc);
-/// `spacing` (mm) rasterizes a closed surface.
+/// `spacing` (mm) rasterizes a closed surface. Its grids (the surface rasterized, the template
+/// rasterized at an image's smallest voxel for its moments) are refused past `memory`
+/// ([`Estimate::grid`]): an image of very anisotropic voxels (0.01 × 10 × 0.5 mm) is small, the
+/// template on a grid of its smallest voxel is not.
 pub fn initial_alignment(
     boundary: &TriMesh,
     target: &Target,
     spacing: f64,
+    memory: MemoryLimit,
 ) -> Result<InitialAlignment> {
     match target {
-        Target::Image { volume, label } => align_to_image(boundary, &volume.foreground(*label)),
+        Target::Image { volume, label } => {
+            let h = volume.spacing().min();
+            check_grid(boundary, h, memory)?;
+            align_to_image(boundary, &volume.foreground(*label))
+        }
         Target::Points(q) => align_to_points(boundary, q),
-        Target::Surface(mesh) => align_to_surface(boundary, mesh, spacing),
+        Target::Surface(mesh) => align_to_surface(boundary, mesh, spacing, memory),
     }
+}
+
+/// Refuses a grid of voxel `h` around `mesh` (as [`grid_around`] makes it, 2 voxels of margin)
+/// past `memory`.
+fn check_grid(mesh: &TriMesh, h: f64, memory: MemoryLimit) -> Result<()> {
+    let (dims, _) = grid_around(mesh, h, 2.0 * h)?;
+    memory.check(&Estimate::grid(dims), || {
+        format!(
+            "the initial alignment's grid of {h:.3} mm voxels ({}×{}×{})",
+            dims[0], dims[1], dims[2]
+        )
+    })
 }
 
 fn align_to_image(boundary: &TriMesh, mask: &Volume) -> Result<InitialAlignment> {
@@ -188,7 +210,12 @@ fn align_to_points(boundary: &TriMesh, q: &[Vec3]) -> Result<InitialAlignment> {
     })
 }
 
-fn align_to_surface(boundary: &TriMesh, mesh: &TriMesh, spacing: f64) -> Result<InitialAlignment> {
+fn align_to_surface(
+    boundary: &TriMesh,
+    mesh: &TriMesh,
+    spacing: f64,
+    memory: MemoryLimit,
+) -> Result<InitialAlignment> {
     if let Err(defect) = check_closed_oriented_manifold(mesh).and_then(|_| check_outward(mesh)) {
         return Ok(InitialAlignment::similarity(
             Matrix4::identity(),
@@ -197,8 +224,10 @@ fn align_to_surface(boundary: &TriMesh, mesh: &TriMesh, spacing: f64) -> Result<
             )],
         ));
     }
+    check_grid(mesh, spacing, memory)?;
     let (dims, grid) = grid_around(mesh, spacing, 2.0 * spacing)?;
     let mask = rasterize(mesh, dims, grid)?;
+    check_grid(boundary, spacing, memory)?;
     align_to_image(boundary, &mask)
 }
 

@@ -10,7 +10,7 @@
 //! # fn read() -> (medial_core::MedialTemplate, medial_core::image::Volume) { unimplemented!() }
 //! let (template, segmentation) = read();
 //! let target = Target::Image { volume: segmentation, label: None };
-//! let start = automatic(&Model::Medial(Box::new(template)), &target).unwrap();
+//! let start = automatic(&Model::Medial(Box::new(template)), &target, MemoryLimit::none()).unwrap();
 //! let fit = start.fit(target, MemoryLimit::none()).unwrap();
 //! let outcomes = fit.run(|_| {}).unwrap();
 //! let fitted = fit.flow().shoot(fit.model().landmarks(), &outcomes.last().unwrap().momenta);
@@ -207,16 +207,16 @@ impl AutomaticStart {
 /// The automatic fit of `model` to `target`: the plan chosen from the data
 /// ([`plan::automatic`], from the model as given) and the initial alignment
 /// ([`initial_alignment`]; a medial template carried by [`align_template`], a plain mesh by the
-/// whole map). Voxels for rasterizing a closed surface to align to: half the mean spoke
+/// whole map), its grids within `memory`. Voxels for rasterizing a closed surface to align to: half the mean spoke
 /// ([`Geometry::alignment_spacing`]), or a 128th of a plain mesh's long extent.
-pub fn automatic(model: &Model, target: &Target) -> Result<AutomaticStart> {
+pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<AutomaticStart> {
     let spec = plan::automatic(model, target)?;
     let (alignment, start): (InitialAlignment, Model) = match model {
         Model::Medial(template) => {
             let boundary = template.boundary_mesh()?;
             let axes = PrincipalAxes::of(boundary.points())?;
             let spacing = Geometry::of(template, &boundary, &axes).alignment_spacing();
-            let alignment = initial_alignment(&boundary, target, spacing)?;
+            let alignment = initial_alignment(&boundary, target, spacing, memory)?;
             let aligned = align_template(template, &alignment)?;
             let mut alignment = alignment;
             alignment.notes.extend(aligned.notes);
@@ -232,7 +232,7 @@ pub fn automatic(model: &Model, target: &Target) -> Result<AutomaticStart> {
         }
         Model::Plain(mesh) => {
             let axes = PrincipalAxes::of(mesh.points())?;
-            let alignment = initial_alignment(mesh, target, axes.extent.z / 128.0)?;
+            let alignment = initial_alignment(mesh, target, axes.extent.z / 128.0, memory)?;
             let carried = mesh.carried(&alignment.matrix);
             (alignment, Model::Plain(carried))
         }
