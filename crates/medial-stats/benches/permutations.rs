@@ -12,21 +12,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 fn grid(n: usize) -> Mesh {
-    let points = (0..=n)
-        .flat_map(|j| (0..=n).map(move |i| [i as f64, j as f64, 0.0]))
-        .collect();
-    let id = |i: usize, j: usize| j * (n + 1) + i;
-    let triangles = (0..n)
-        .flat_map(|j| {
-            (0..n).flat_map(move |i| {
-                [
-                    [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                    [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-                ]
-            })
-        })
-        .collect();
-    Mesh::new(points, triangles).unwrap()
+    Mesh::grid(n, |i, j| [i as f64, j as f64, 0.0]).unwrap()
 }
 
 fn bench(c: &mut Criterion) {

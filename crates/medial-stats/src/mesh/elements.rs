@@ -32,6 +32,33 @@ impl Mesh {
         Ok(Self { points, triangles })
     }
 
+    /// An `n × n` grid of squares, each cut into two triangles along its diagonal, point
+    /// `(i, j)` (`0 ≤ i, j ≤ n`) at `place(i, j)`: a test mesh of a sheet.
+    ///
+    /// ```
+    /// use medial_stats::mesh::Mesh;
+    /// let mesh = Mesh::grid(2, |i, j| [i as f64, j as f64, 0.0]).unwrap();
+    /// assert_eq!((mesh.points().len(), mesh.triangles().len()), (9, 8));
+    /// ```
+    pub fn grid(n: usize, place: impl Fn(usize, usize) -> [f64; 3]) -> Result<Self> {
+        let points = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| (i, j)))
+            .map(|(i, j)| place(i, j))
+            .collect();
+        let id = |i: usize, j: usize| j * (n + 1) + i;
+        let triangles = (0..n)
+            .flat_map(|j| {
+                (0..n).flat_map(move |i| {
+                    [
+                        [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
+                        [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
+                    ]
+                })
+            })
+            .collect();
+        Self::new(points, triangles)
+    }
+
     /// The points.
     pub fn points(&self) -> &[[f64; 3]] {
         &self.points

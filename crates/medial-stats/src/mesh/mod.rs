@@ -35,26 +35,15 @@ pub(crate) mod tests {
     /// An n × n grid of squares cut into triangles, its points moved off the lattice so that
     /// areas differ.
     pub(crate) fn grid(n: usize) -> Mesh {
-        let mut points = Vec::new();
-        for j in 0..=n {
-            for i in 0..=n {
-                let (x, y) = (i as f64, j as f64);
-                points.push([
-                    x + 0.2 * (1.3 * y + 0.7 * x).sin(),
-                    y + 0.2 * (0.9 * x).cos(),
-                    0.0,
-                ]);
-            }
-        }
-        let id = |i: usize, j: usize| j * (n + 1) + i;
-        let mut triangles = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                triangles.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-                triangles.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-        }
-        Mesh::new(points, triangles).unwrap()
+        Mesh::grid(n, |i, j| {
+            let (x, y) = (i as f64, j as f64);
+            [
+                x + 0.2 * (1.3 * y + 0.7 * x).sin(),
+                y + 0.2 * (0.9 * x).cos(),
+                0.0,
+            ]
+        })
+        .unwrap()
     }
 
     /// The connected components of the active elements by breadth-first search, each sorted.

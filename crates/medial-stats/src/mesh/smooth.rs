@@ -104,21 +104,7 @@ mod tests {
     /// A flat regular grid of 2·n² right triangles of side h, centred on the origin.
     fn flat(n: usize, h: f64) -> Mesh {
         let half = n as f64 * h / 2.0;
-        let points = (0..=n)
-            .flat_map(|j| (0..=n).map(move |i| [i as f64 * h - half, j as f64 * h - half, 0.0]))
-            .collect();
-        let id = |i: usize, j: usize| j * (n + 1) + i;
-        let triangles = (0..n)
-            .flat_map(|j| {
-                (0..n).flat_map(move |i| {
-                    [
-                        [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                        [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-                    ]
-                })
-            })
-            .collect();
-        Mesh::new(points, triangles).unwrap()
+        Mesh::grid(n, |i, j| [i as f64 * h - half, j as f64 * h - half, 0.0]).unwrap()
     }
 
     /// A spike at the centre spreads into a Gaussian of the FWHM asked for: its second moment

@@ -11,23 +11,11 @@ use crate::common::{design, noise};
 
 /// A 3 × 3 grid of squares cut into 18 triangles, its points moved off the lattice.
 fn small_mesh() -> Mesh {
-    let n = 3;
-    let points = (0..=n)
-        .flat_map(|j| (0..=n).map(move |i| (i as f64, j as f64)))
-        .map(|(x, y)| [x + 0.15 * (2.0 * y + x).sin(), y + 0.1 * x.cos(), 0.0])
-        .collect();
-    let id = |i: usize, j: usize| j * (n + 1) + i;
-    let triangles = (0..n)
-        .flat_map(|j| {
-            (0..n).flat_map(move |i| {
-                [
-                    [id(i, j), id(i + 1, j), id(i + 1, j + 1)],
-                    [id(i, j), id(i + 1, j + 1), id(i, j + 1)],
-                ]
-            })
-        })
-        .collect();
-    Mesh::new(points, triangles).unwrap()
+    Mesh::grid(3, |i, j| {
+        let (x, y) = (i as f64, j as f64);
+        [x + 0.15 * (2.0 * y + x).sin(), y + 0.1 * x.cos(), 0.0]
+    })
+    .unwrap()
 }
 
 /// All permutations of 0..n (Heap's algorithm).
