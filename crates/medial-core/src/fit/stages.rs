@@ -204,7 +204,7 @@ fn check_fits(c: &Checkpoint, stages: usize, len: usize) -> Result<()> {
 mod tests {
     use super::*;
     use crate::attachment::ssd::Ssd;
-    use crate::fit::augmented_lagrangian::{CoarseTime, Settle};
+    use crate::fit::augmented_lagrangian::{CoarseTime, Extend, Settle};
     use crate::fit::guard::Guard;
     use crate::fit::{ConstraintSet, ProgressRule, StopReason};
     use crate::flow::{Flow, FlowParams};
@@ -588,6 +588,38 @@ mod tests {
             assert_eq!(outcome.al_iterations, ends_after);
             assert_eq!(outcome.settled, settled);
             assert!(!settled || outcome.converged());
+        }
+    }
+
+    /// Past its AL iterations a schedule goes on while `max |C|` is above the level and each AL
+    /// iteration at least halves it, at most `at_most` more; above no level it never goes on.
+    #[test]
+    fn a_schedule_goes_on_while_its_constraints_are_above_the_level_and_halving() {
+        let budget = |lbfgs: &mut LbfgsOptions, schedule: &mut AlSchedule| {
+            lbfgs.max_iterations = 12;
+            schedule.first_iterations = None;
+        };
+        let all = al_ends(budget);
+        assert!(all[1].0 <= 0.5 * all[0].0, "the case halves |C|: {all:?}");
+        let halves_again = all[2].0 <= 0.5 * all[1].0;
+        // (scheduled AL iterations, level, most added, AL iterations run)
+        for (iterations, above, at_most, runs) in [
+            (1, f64::INFINITY, 4, 1),
+            (1, 0.0, 1, 2),
+            (1, 0.5 * (all[0].0 + all[1].0), 4, 2),
+            (2, 0.0, 1, if halves_again { 3 } else { 2 }),
+        ] {
+            let (outcome, totals) = constrained_run(|lbfgs, schedule| {
+                budget(lbfgs, schedule);
+                schedule.iterations = iterations;
+                schedule.extend = Some(Extend { above, at_most });
+            });
+            assert_eq!(
+                totals.len(),
+                runs,
+                "{iterations} {above} {at_most} on {all:?}"
+            );
+            assert_eq!(outcome.al_iterations, runs);
         }
     }
 
