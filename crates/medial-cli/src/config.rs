@@ -442,11 +442,6 @@ impl StageConfig {
         }
     }
 
-    /// The data weight, with the default of the attachment ([`StageSpec::data_weight`]).
-    pub fn data_weight(&self) -> f64 {
-        self.spec().data_weight()
-    }
-
     /// The data source of the stage: its file and how to read it.
     pub fn source(&self) -> Result<Source, String> {
         let missing = |what: &str| format!("stage '{}': {what}", self.name);
@@ -672,7 +667,7 @@ target = "s.vtk"
     fn minimal_config_gets_defaults() {
         let c: Config = toml::from_str(MINIMAL).unwrap();
         assert_eq!(c.flow.time_steps, 40);
-        assert_eq!(c.stages[0].data_weight(), 1.0);
+        assert_eq!(c.stages[0].spec().data_weight(), 1.0);
         assert_eq!(c.stages[0].max_iterations, 1000);
         c.check().unwrap();
     }
