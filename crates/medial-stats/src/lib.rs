@@ -13,18 +13,21 @@
 //!
 //! | module | what it holds | entry points |
 //! |---|---|---|
-//! | [`design`] | the design matrix: CSV tables with named and categorical columns, meshglm's whitespace files | [`Design`], [`TableOptions`], [`design::parse_matrix`] |
+//! | [`design`] | the design matrix: CSV tables with named and categorical columns, meshglm's whitespace files; rows matched to subjects by name | [`Design`], [`TableOptions`], [`Design::match_subjects`], [`design::parse_matrix`] |
 //! | [`contrast`] | contrasts by name or vector, F-tests | [`Contrast`] |
 //! | [`glm`] | least squares at every element, t and F, parametric p, missing values | [`Glm`], [`Observations`], [`Tail`] |
 //! | [`permutation`] | Freedman–Lane permutations, seeded or exact, and their maxima | [`Scheme`], [`NullDistributions`] |
 //! | [`mesh`] | element areas and adjacency, clusters, TFCE, heat-diffusion smoothing | [`Mesh`], [`Elements`], [`find_clusters`], [`cluster_outlines`], [`tfce()`], [`smooth`] |
 //! | [`fdr`] | Benjamini–Hochberg q-values | [`q_values`] |
 //! | [`analysis`] | an analysis from data to maps | [`Study`], [`Options`], [`ContrastResult`] |
+//! | [`atoms`] | per-atom measures of fitted medial models (thickness, spokes, displacement along the medial normal) | [`AtomMeasure`], [`SheetNormals`], [`atom_values`] |
+//! | [`shape`] | Procrustes alignment, generalised Procrustes analysis of medial atoms, principal components | [`procrustes`], [`generalised_procrustes`], [`pca()`] |
 //! | [`error`] | the one error type | [`StatsError`] |
 
 #![warn(missing_docs)]
 
 pub mod analysis;
+pub mod atoms;
 pub mod contrast;
 pub mod design;
 pub mod error;
@@ -32,10 +35,12 @@ pub mod fdr;
 pub mod glm;
 pub mod mesh;
 pub mod permutation;
+pub mod shape;
 
 pub use analysis::{ClusterInference, ContrastResult, Options, PermutationSummary, Study};
+pub use atoms::{atom_values, Alignment, AtomMeasure, SheetNormals};
 pub use contrast::Contrast;
-pub use design::{Design, TableOptions};
+pub use design::{Candidate, Design, TableOptions};
 pub use error::{Result, StatsError};
 pub use fdr::q_values;
 pub use glm::{Glm, GlmOptions, Observations, Tail};
@@ -44,3 +49,4 @@ pub use mesh::{
     Mesh, Support, TfceParameters,
 };
 pub use permutation::{NullDistributions, Scheme};
+pub use shape::{generalised_procrustes, pca, procrustes, AtomShape, Gpa, Pca, Similarity};

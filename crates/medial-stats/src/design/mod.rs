@@ -34,6 +34,18 @@ pub struct Design {
     names: Vec<String>,
     matrix: DMatrix<f64>,
     factors: Vec<Factor>,
+    /// The subject of every row (a CSV table's `subject` or `id` column), if named.
+    subject_names: Option<Vec<String>>,
+}
+
+/// A subject a design's rows can be matched to: its name, and why its data cannot be used, if
+/// so (a fit that failed).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Candidate<'a> {
+    /// The subject's name.
+    pub name: &'a str,
+    /// Why its data cannot be used (`None`: usable).
+    pub unusable: Option<&'a str>,
 }
 
 impl Design {
@@ -90,6 +102,7 @@ impl Design {
             names,
             matrix,
             factors,
+            subject_names: None,
         })
     }
 
@@ -153,6 +166,105 @@ impl Design {
         }
         let rows: Vec<usize> = (0..keep.len()).filter(|&i| keep[i]).collect();
         let matrix = self.matrix.select_rows(rows.iter());
-        Self::with_factors(self.names.clone(), matrix, self.factors.clone())
+        let mut design = Self::with_factors(self.names.clone(), matrix, self.factors.clone())?;
+        design.subject_names = self
+            .subject_names
+            .as_ref()
+            .map(|names| rows.iter().map(|&i| names[i].clone()).collect());
+        Ok(design)
+    }
+
+    /// The subject of every row, from a CSV table's column named `subject` or `id` (any letter
+    /// case); `None` for a table without one and for a matrix.
+    pub fn subject_names(&self) -> Option<&[String]> {
+        self.subject_names.as_deref()
+    }
+
+    /// The same design with `names` as the subjects of its rows (one per row, distinct).
+    pub fn with_subject_names(mut self, names: Vec<String>) -> Result<Self> {
+        if names.len() != self.subjects() {
+            return Err(StatsError::Shape {
+                what: "subject names (one per design row)",
+                expected: self.subjects(),
+                found: names.len(),
+            });
+        }
+        let mut seen = std::collections::BTreeMap::new();
+        for (i, name) in names.iter().enumerate() {
+            if name.is_empty() {
+                return Err(StatsError::design(
+                    format!("row {}", i + 1),
+                    "has no subject name",
+                ));
+            }
+            if let Some(first) = seen.insert(name.as_str(), i) {
+                return Err(StatsError::design(
+                    format!("subject `{name}`"),
+                    format!("appears twice (rows {} and {})", first + 1, i + 1),
+                ));
+            }
+        }
+        self.subject_names = Some(names);
+        Ok(self)
+    }
+
+    /// For every design row, the index in `candidates` of its subject (matched by name). Every
+    /// row's subject must be a usable candidate; candidates the design does not name are left
+    /// out. The error names the first subject that does not match, and why.
+    ///
+    /// ```
+    /// use medial_stats::{design::Candidate, Design, TableOptions};
+    ///
+    /// let csv = "subject,group\ns3,b\ns1,a\ns2,b\ns4,a\n";
+    /// let design = Design::from_csv(csv, &TableOptions::default())?;
+    /// let cohort = ["s1", "s2", "s3", "s4", "s5"].map(|name| Candidate { name, unusable: None });
+    /// assert_eq!(design.match_subjects(&cohort)?, [2, 0, 1, 3]);
+    /// let short = &cohort[..3];
+    /// assert_eq!(
+    ///     design.match_subjects(short).unwrap_err().to_string(),
+    ///     "design, subject `s4` (row 4): is not in the cohort (its subjects: s1, s2, s3)"
+    /// );
+    /// # Ok::<(), medial_stats::StatsError>(())
+    /// ```
+    pub fn match_subjects(&self, candidates: &[Candidate<'_>]) -> Result<Vec<usize>> {
+        let names = self.subject_names.as_ref().ok_or_else(|| {
+            StatsError::design(
+                "table",
+                "has no `subject` (or `id`) column to match its rows to the subjects by name",
+            )
+        })?;
+        let index: std::collections::HashMap<&str, usize> = candidates
+            .iter()
+            .enumerate()
+            .map(|(k, c)| (c.name, k))
+            .collect();
+        names
+            .iter()
+            .enumerate()
+            .map(|(row, name)| {
+                let place = || format!("subject `{name}` (row {})", row + 1);
+                match index.get(name.as_str()) {
+                    None => {
+                        const SHOWN: usize = 8;
+                        let mut listed: Vec<&str> =
+                            candidates.iter().take(SHOWN).map(|c| c.name).collect();
+                        if candidates.len() > SHOWN {
+                            listed.push("…");
+                        }
+                        Err(StatsError::design(
+                            place(),
+                            format!("is not in the cohort (its subjects: {})", listed.join(", ")),
+                        ))
+                    }
+                    Some(&k) => match candidates[k].unusable {
+                        Some(why) => Err(StatsError::design(
+                            place(),
+                            format!("has no data to test: {why}"),
+                        )),
+                        None => Ok(k),
+                    },
+                }
+            })
+            .collect()
     }
 }

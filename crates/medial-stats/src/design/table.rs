@@ -169,7 +169,14 @@ pub(super) fn parse_table(text: &str, options: &TableOptions) -> Result<Design> 
         }
     }
     let matrix = DMatrix::from_fn(n, columns.len(), |i, j| columns[j][i]);
-    Design::with_factors(names, matrix, factors)
+    let design = Design::with_factors(names, matrix, factors)?;
+    match header
+        .iter()
+        .position(|h| matches!(h.to_ascii_lowercase().as_str(), "subject" | "id"))
+    {
+        Some(j) => design.with_subject_names(rows.iter().map(|(_, r)| r[j].clone()).collect()),
+        None => Ok(design),
+    }
 }
 
 #[cfg(test)]

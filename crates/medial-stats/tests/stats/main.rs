@@ -1,8 +1,10 @@
 //! The tests of medial-stats against independent computations: dense least squares, brute-force
 //! enumeration of permutations, and meshglm's test data.
 
+mod atoms;
 mod calibration;
 mod common;
 mod glm;
 mod meshglm;
 mod permutation;
+mod shape;
