@@ -4,6 +4,7 @@
 
 pub mod distance;
 pub mod rasterize;
+pub mod slice;
 pub mod volume;
 
 pub use volume::Volume;

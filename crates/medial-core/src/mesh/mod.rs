@@ -5,6 +5,7 @@
 pub mod axes;
 pub mod bounds;
 pub mod distance;
+pub mod section;
 pub mod subdivide;
 pub mod topology;
 
