@@ -5,6 +5,7 @@
 use super::label::number;
 use crate::error::CliError;
 use plotters::coord::ranged1d::{AsRangedCoord, Ranged, ValueFormatter};
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::ops::Range;
@@ -26,13 +27,28 @@ pub struct Line {
     pub dots: bool,
 }
 
-/// A vertical mark across a panel (the start of an AL iteration) with a label (its μ).
+/// What a vertical mark marks (its line style).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MarkKind {
+    /// The start of an AL iteration: dashed grey.
+    Al,
+    /// A change of the flow's time steps (coarse to fine): solid orange.
+    Switch,
+    /// A fresh start of the minimiser within an AL iteration: dotted red.
+    Restart,
+}
+
+/// A vertical mark across a panel (the start of an AL iteration, the switch to finer time
+/// steps, a restart) with a label (its μ, the steps).
 #[derive(Clone)]
 pub struct Mark {
     /// Where, on the x axis.
     pub x: f64,
-    /// The label, drawn at the top of the panel right of the mark.
+    /// The label, drawn at the top of the panel right of the mark (consecutive labels on two
+    /// alternating lines).
     pub label: String,
+    /// What it marks.
+    pub kind: MarkKind,
 }
 
 /// One panel: a quantity against x.
@@ -185,18 +201,32 @@ where
         .label_style(("sans-serif", 11))
         .axis_desc_style(("sans-serif", 12))
         .draw()?;
-    for mark in &panel.marks {
-        chart.draw_series(DashedLineSeries::new(
-            [(mark.x, y.start), (mark.x, y.end)],
-            4,
-            3,
-            RGBColor(150, 150, 150).stroke_width(1),
+    for (k, mark) in panel.marks.iter().enumerate() {
+        let ends = [(mark.x, y.start), (mark.x, y.end)];
+        let colour = match mark.kind {
+            MarkKind::Al => RGBColor(150, 150, 150),
+            MarkKind::Switch => RGBColor(230, 120, 0),
+            MarkKind::Restart => RGBColor(214, 39, 40),
+        };
+        match mark.kind {
+            MarkKind::Switch => chart.draw_series(LineSeries::new(ends, colour.stroke_width(2))),
+            MarkKind::Al => chart.draw_series(DashedLineSeries::new(ends, 4, 3, colour.into())),
+            MarkKind::Restart => {
+                chart.draw_series(DashedLineSeries::new(ends, 1, 3, colour.into()))
+            }
+        }?;
+        let text = match mark.kind {
+            MarkKind::Al => RGBColor(90, 90, 90),
+            _ => colour,
+        };
+        chart.draw_series(std::iter::once(
+            EmptyElement::at((mark.x, y.end))
+                + Text::new(
+                    mark.label.clone(),
+                    (3, 2 + 11 * (k as i32 % 2)),
+                    ("sans-serif", 10).into_font().color(&text),
+                ),
         ))?;
-        chart.draw_series(std::iter::once(Text::new(
-            mark.label.clone(),
-            (mark.x, y.end),
-            ("sans-serif", 10).into_font().color(&RGBColor(90, 90, 90)),
-        )))?;
     }
     // Only points on the axes: plotters' pixel arithmetic overflows far beyond them.
     let keep = |&(px, py): &(f64, f64)| x.contains(&px) && py >= y.start && py <= y.end;
@@ -310,6 +340,219 @@ pub fn histogram(
     Ok(Some(svg))
 }
 
+/// Width and height of one slice panel, pixels.
+const PLANE: (u32, u32) = (330, 330);
+
+/// The grey of an image's foreground in a slice.
+const MASK: RGBColor = RGBColor(200, 200, 200);
+
+/// The colour of the model's boundary in a slice (`#d62728`).
+pub const BOUNDARY: RGBColor = RGBColor(214, 39, 40);
+
+/// The colour of the medial sheet in a slice (`#1f77b4`).
+pub const MEDIAL: RGBColor = RGBColor(31, 119, 180);
+
+/// What a slice panel draws, in the plane's coordinates `(u, v)` (mm).
+#[derive(Default)]
+pub struct Curves {
+    /// The image's foreground, as rectangles `[u0, v0, u1, v1]`.
+    pub mask: Vec<[f64; 4]>,
+    /// The target surface's section.
+    pub target: Vec<Vec<(f64, f64)>>,
+    /// Target points near the plane.
+    pub points: Vec<(f64, f64)>,
+    /// The model's boundary's section.
+    pub boundary: Vec<Vec<(f64, f64)>>,
+    /// The medial sheet's section.
+    pub medial: Vec<Vec<(f64, f64)>>,
+}
+
+/// One slice: a plane with what it cuts, on axes of equal scale.
+pub struct PlanePanel {
+    /// The caption (the plane and the time point).
+    pub title: String,
+    /// The horizontal axis.
+    pub u_label: String,
+    /// The vertical axis.
+    pub v_label: String,
+    /// The horizontal range to show, mm (widened to equal scale).
+    pub u_range: Range<f64>,
+    /// The vertical range to show, mm (widened to equal scale).
+    pub v_range: Range<f64>,
+    /// What is drawn.
+    pub curves: Curves,
+}
+
+/// Builds the chart of a slice panel on `area`.
+fn plane_chart<'a, 'b>(
+    area: &'a DrawingArea<SVGBackend<'b>, Shift>,
+    title: &str,
+    u: Range<f64>,
+    v: Range<f64>,
+) -> Result<
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    DrawingAreaErrorKind<std::io::Error>,
+> {
+    ChartBuilder::on(area)
+        .caption(title, ("sans-serif", 12))
+        .margin(6)
+        .x_label_area_size(34)
+        .y_label_area_size(46)
+        .build_cartesian_2d(u, v)
+}
+
+/// `u` and `v` widened about their centres so that a mm is as long across as up on a plot of
+/// `pixels` (width, height).
+fn equal_scale(u: Range<f64>, v: Range<f64>, pixels: (u32, u32)) -> (Range<f64>, Range<f64>) {
+    let (du, dv) = (u.end - u.start, v.end - v.start);
+    let aspect = f64::from(pixels.0.max(1)) / f64::from(pixels.1.max(1));
+    let widen = |r: Range<f64>, to: f64| {
+        let c = (r.start + r.end) / 2.0;
+        c - to / 2.0..c + to / 2.0
+    };
+    if du / dv < aspect {
+        (widen(u, dv * aspect), v)
+    } else {
+        (u, widen(v, du / aspect))
+    }
+}
+
+/// Slice panels in a grid `columns` wide, as one SVG element: on axes of equal scale, the
+/// image's foreground in grey, the target's section in black, the model's boundary in
+/// [`BOUNDARY`] and its medial sheet in [`MEDIAL`]. `what` names the figure in errors.
+///
+/// Errors: [`CliError::Figure`] when plotters fails.
+pub fn planes(what: &str, panels: &[PlanePanel], columns: usize) -> Result<String, CliError> {
+    let fail = figure_error(what);
+    // The plotting area of a panel, from a chart built on a throwaway canvas.
+    let plot = {
+        let mut scratch = String::new();
+        let root = SVGBackend::with_string(&mut scratch, PLANE).into_drawing_area();
+        let chart = plane_chart(&root, "x", 0.0..1.0, 0.0..1.0).map_err(&fail)?;
+        chart.plotting_area().dim_in_pixel()
+    };
+    let columns = columns.clamp(1, panels.len().max(1));
+    let rows = panels.len().div_ceil(columns).max(1);
+    let mut svg = String::new();
+    {
+        let size = (PLANE.0 * columns as u32, PLANE.1 * rows as u32);
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+        root.fill(&WHITE).map_err(&fail)?;
+        for (area, panel) in root.split_evenly((rows, columns)).iter().zip(panels) {
+            draw_plane(area, panel, plot).map_err(&fail)?;
+        }
+        root.present().map_err(&fail)?;
+    }
+    Ok(svg)
+}
+
+/// Draws one slice panel whose plotting area is `plot` pixels.
+fn draw_plane(
+    area: &DrawingArea<SVGBackend, Shift>,
+    panel: &PlanePanel,
+    plot: (u32, u32),
+) -> Result<(), DrawingAreaErrorKind<std::io::Error>> {
+    let (u, v) = equal_scale(panel.u_range.clone(), panel.v_range.clone(), plot);
+    let mut chart = plane_chart(area, &panel.title, u, v)?;
+    let format = |v: &f64| number(*v);
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc(panel.u_label.as_str())
+        .y_desc(panel.v_label.as_str())
+        .x_labels(5)
+        .y_labels(5)
+        .x_label_formatter(&format)
+        .y_label_formatter(&format)
+        .label_style(("sans-serif", 10))
+        .axis_desc_style(("sans-serif", 11))
+        .draw()?;
+    let c = &panel.curves;
+    chart.draw_series(
+        c.mask
+            .iter()
+            .map(|r| Rectangle::new([(r[0], r[1]), (r[2], r[3])], MASK.filled())),
+    )?;
+    let paths = |lines: &[Vec<(f64, f64)>], colour: RGBColor| {
+        lines
+            .iter()
+            .map(move |l| PathElement::new(l.clone(), colour.stroke_width(2)))
+            .collect::<Vec<_>>()
+    };
+    chart.draw_series(paths(&c.target, BLACK))?;
+    chart.draw_series(c.points.iter().map(|&p| Circle::new(p, 2, BLACK.filled())))?;
+    chart.draw_series(paths(&c.boundary, BOUNDARY))?;
+    chart.draw_series(paths(&c.medial, MEDIAL))?;
+    Ok(())
+}
+
+/// Text safe in XML.
+fn escape(text: &str) -> String {
+    text.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+/// A PNG of views side by side, each `width × height` pixels, in one SVG element with a caption
+/// above each view and, where `scale` gives its range (mm), the viridis colour scale below.
+pub fn image_strip(
+    png: &[u8],
+    width: usize,
+    height: usize,
+    captions: &[String],
+    scale: Option<(f64, f64)>,
+) -> String {
+    use std::fmt::Write;
+    let total = width * captions.len();
+    let top = 22;
+    let bottom = if scale.is_some() { 44 } else { 6 };
+    let h = top + height + bottom;
+    let mut svg = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{total}\" height=\"{h}\" \
+         viewBox=\"0 0 {total} {h}\" font-family=\"sans-serif\">"
+    );
+    for (k, caption) in captions.iter().enumerate() {
+        let _ = write!(
+            svg,
+            "<text x=\"{}\" y=\"15\" font-size=\"13\" text-anchor=\"middle\">{}</text>",
+            k * width + width / 2,
+            escape(caption)
+        );
+    }
+    let _ = write!(
+        svg,
+        "<image x=\"0\" y=\"{top}\" width=\"{total}\" height=\"{height}\" \
+         href=\"data:image/png;base64,{}\"/>",
+        super::png::base64(png)
+    );
+    if let Some((lo, hi)) = scale {
+        let (x0, bar, y) = (total / 2 - 150, 300, top + height + 6);
+        for k in 0..60 {
+            let [r, g, b] =
+                super::render::viridis((k as f64 + 0.5) / 60.0).map(|c| (255.0 * c).round() as u8);
+            let _ = write!(
+                svg,
+                "<rect x=\"{}\" y=\"{y}\" width=\"5.5\" height=\"12\" fill=\"rgb({r},{g},{b})\"/>",
+                x0 + k * bar / 60
+            );
+        }
+        let ty = y + 26;
+        let _ = write!(
+            svg,
+            "<text x=\"{x0}\" y=\"{ty}\" font-size=\"11\" text-anchor=\"middle\">{}</text>\
+             <text x=\"{}\" y=\"{ty}\" font-size=\"11\" text-anchor=\"middle\">{}</text>\
+             <text x=\"{}\" y=\"{ty}\" font-size=\"11\" text-anchor=\"middle\">thickness (mm)</text>",
+            number(lo),
+            x0 + bar,
+            number(hi),
+            x0 + bar / 2
+        );
+    }
+    svg.push_str("</svg>");
+    svg
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -325,6 +568,7 @@ mod tests {
             marks: vec![Mark {
                 x: 1.0,
                 label: "μ = 0.02".into(),
+                kind: MarkKind::Al,
             }],
         }
     }

@@ -8,13 +8,18 @@
 //! | `report.html` | the figures and tables of the fit, self-contained ([`page`]) |
 //!
 //! [`folder`] reads the fit folder, [`table`] its CSV files, [`figures`] draws with plotters,
-//! [`label`] names columns and writes numbers.
+//! [`label`] names columns and writes numbers; [`overlay`] draws the model on the data (slices
+//! of the target with the model's sections, a 3-D view rendered by [`render`] and written by
+//! [`png`]).
 
 mod animation;
 mod figures;
 mod folder;
 mod label;
+mod overlay;
 mod page;
+mod png;
+mod render;
 mod table;
 
 use crate::error::CliError;

@@ -1,9 +1,10 @@
 //! `report.html`: one self-contained page (inline CSS and SVG, no script, nothing loaded) with
 //! the figures and tables of a fit folder.
 
-use super::figures::{self, Counted, Line, Mark, Panel};
+use super::figures::{self, Counted, Line, Mark, MarkKind, Panel};
 use super::folder::{FitFolder, FlowKind};
 use super::label::{label, number};
+use super::overlay;
 use super::table::Table;
 use crate::error::CliError;
 use maud::{html, Markup, PreEscaped, DOCTYPE};
@@ -50,6 +51,8 @@ pub fn render(folder: &FitFolder) -> Result<String, CliError> {
             body {
                 h1 { "medial fit: " (name) }
                 p { "Status: " span class={"status " (status)} { (status) } }
+                (overlay::section_markup(folder)?)
+                (alignment(folder))
                 (summary_tables(&folder.summary))
                 (stages(folder)?)
                 (over_time(folder)?)
@@ -147,7 +150,7 @@ fn summary_tables(summary: &Value) -> Markup {
         .map(|k| k.as_str())
         // `files` lists the set, not a figure (and a report made in the staging folder is
         // made before the list is final).
-        .chain(["stages", "status", "files"])
+        .chain(["stages", "status", "files", "alignment"])
         .collect();
     html! {
         h2 { "Fit" }
@@ -171,6 +174,54 @@ fn summary_tables(summary: &Value) -> Markup {
     }
 }
 
+/// The initial alignment of an automatic fit: what each step did (`summary.json`'s
+/// `alignment`: one line per step, `step: figures`, or an object of named figures) and the map
+/// (`alignment.txt`); nothing for a fit without one.
+fn alignment(folder: &FitFolder) -> Markup {
+    let steps = &folder.summary["alignment"];
+    let matrix = std::fs::read_to_string(folder.dir.join("alignment.txt"))
+        .ok()
+        .map(|text| {
+            text.lines()
+                .map(|l| l.split_whitespace().map(str::to_owned).collect::<Vec<_>>())
+                .filter(|row| !row.is_empty())
+                .collect::<Vec<_>>()
+        })
+        .filter(|rows| !rows.is_empty());
+    if steps.is_null() && matrix.is_none() {
+        return html! {};
+    }
+    html! {
+        h2 { "Initial alignment" }
+        p.note {
+            "An automatic fit first moves the template onto the target (a similarity, an affine              map where the target calls for one, then a projection back onto the medial              constraints); the flow starts from the result (aligned_template.vtk, t = 0 above)."
+        }
+        @match steps {
+            Value::Array(lines) => {
+                table {
+                    tr { th.key { "step" } th.key { "what it did" } }
+                    @for line in lines {
+                        @let text = cell(line);
+                        @let (step, figures) = text.split_once(": ").unwrap_or(("", &text));
+                        tr { td.key { (step) } td.key { (figures) } }
+                    }
+                }
+            }
+            Value::Object(map) => { (key_values(map, &[])) }
+            Value::Null => {}
+            other => { p { (cell(other)) } }
+        }
+        @if let Some(rows) = &matrix {
+            p.note { "alignment.txt, the initial map (template → subject, RAS mm, homogeneous):" }
+            table {
+                @for row in rows {
+                    tr { @for v in row { td { (v.parse::<f64>().map(number).unwrap_or_else(|_| v.clone())) } } }
+                }
+            }
+        }
+    }
+}
+
 /// The rows of `log` in runs of one stage, in order: `(name, first row, end row)`.
 fn stage_runs(log: &Table) -> Vec<(String, usize, usize)> {
     let names = log.text("stage").unwrap_or_default();
@@ -184,52 +235,150 @@ fn stage_runs(log: &Table) -> Vec<(String, usize, usize)> {
     runs
 }
 
-/// Per stage, the paper's Figs. 2–3: each column of [`STAGE_COLUMNS`] against the iteration,
-/// the start of each AL iteration marked with its μ.
+/// Where a minimisation starts within the rows `start..end` of `log`, as marks at its row
+/// (relative to `start`): a row whose iteration does not follow the one before (0: a fresh
+/// start). A new AL iteration is labelled with its number and μ (in constrained stages), a
+/// change of the flow's time steps (coarse to fine) with the steps, and a fresh start within
+/// the same AL iteration and time steps a restart.
+fn minimisation_marks(log: &Table, start: usize, end: usize) -> Vec<Mark> {
+    let column = |name| log.numbers(name).unwrap_or_default();
+    let (al, mu, iteration, steps) = (
+        column("al_iteration"),
+        column("mu"),
+        column("iteration"),
+        column("time_steps"),
+    );
+    let at = |v: &[f64], i: usize| v.get(i).copied().filter(|x| x.is_finite());
+    let mut marks = Vec::new();
+    for i in start..end {
+        let first = i == start;
+        let fresh = first
+            || at(&iteration, i)
+                .zip(at(&iteration, i - 1))
+                .is_some_and(|(a, b)| a <= b);
+        let new_al = first || at(&al, i) != at(&al, i - 1);
+        let switch = !first && at(&steps, i) != at(&steps, i - 1);
+        if !(fresh || new_al || switch) {
+            continue;
+        }
+        let mut parts = Vec::new();
+        let constrained = at(&mu, i).is_some_and(|m| m > 0.0);
+        if new_al && constrained {
+            let n = at(&al, i).map_or(String::new(), |a| format!("AL {}, ", a + 1.0));
+            parts.push(format!("{n}μ = {}", number(mu[i])));
+        }
+        if switch {
+            let show = |v: Option<f64>| v.map_or("?".into(), number);
+            parts.push(format!(
+                "{} → {} time steps",
+                show(at(&steps, i - 1)),
+                show(at(&steps, i))
+            ));
+        }
+        let kind = if switch {
+            MarkKind::Switch
+        } else if new_al {
+            MarkKind::Al
+        } else {
+            parts.push("restart".into());
+            MarkKind::Restart
+        };
+        if !parts.is_empty() {
+            marks.push(Mark {
+                x: (i - start) as f64,
+                label: parts.join(", "),
+                kind,
+            });
+        }
+    }
+    marks
+}
+
+/// The rows `start..end` cut where a minimisation starts afresh (its iteration does not follow
+/// the row before), as `(first, end)` row ranges.
+fn minimisations(log: &Table, start: usize, end: usize) -> Vec<(usize, usize)> {
+    let iteration = log.numbers("iteration").unwrap_or_default();
+    let mut pieces: Vec<(usize, usize)> = Vec::new();
+    for i in start..end {
+        let fresh = i == start
+            || matches!((iteration.get(i), iteration.get(i - 1)), (Some(a), Some(b)) if a <= b);
+        match pieces.last_mut() {
+            Some(piece) if !fresh => piece.1 = i + 1,
+            _ => pieces.push((i, i + 1)),
+        }
+    }
+    pieces
+}
+
+/// The L-BFGS and AL iterations of stage `name` as the summary's table counts them (its
+/// `iterations` and `al_iterations`), else from the log: the rows after each minimisation's
+/// start, and the distinct AL iterations.
+fn iteration_counts(folder: &FitFolder, name: &str, start: usize, end: usize) -> (usize, usize) {
+    let stage = folder.summary["stages"]
+        .as_array()
+        .and_then(|stages| stages.iter().find(|s| s["name"].as_str() == Some(name)));
+    let count = |key: &str| stage.and_then(|s| s[key].as_u64()).map(|n| n as usize);
+    let from_log = || {
+        let pieces = minimisations(&folder.log, start, end);
+        let rows = end - start - pieces.len();
+        let mut al = folder.log.numbers("al_iteration").unwrap_or_default()[start..end].to_vec();
+        al.dedup();
+        (rows, al.len().max(1))
+    };
+    match (count("iterations"), count("al_iterations")) {
+        (Some(i), Some(a)) => (i, a),
+        _ => from_log(),
+    }
+}
+
+/// Per stage, the paper's Figs. 2–3: each column of [`STAGE_COLUMNS`] against the row of the
+/// log, the start of each AL iteration marked with its μ, the switch from coarse to fine time
+/// steps and every restart marked and labelled, the line broken where a minimisation starts.
 fn stages(folder: &FitFolder) -> Result<Markup, CliError> {
     let log = &folder.log;
-    let al = log.numbers("al_iteration").unwrap_or_default();
-    let mu = log.numbers("mu").unwrap_or_default();
     let mut figures = Vec::new();
     for (name, start, end) in stage_runs(log) {
-        let marks: Vec<Mark> = (start..end)
-            .filter(|&i| i == start || al.get(i) != al.get(i - 1))
-            .filter(|&i| mu.get(i).is_some_and(|&m| m > 0.0))
-            .map(|i| Mark {
-                x: (i - start) as f64,
-                label: format!("μ = {}", number(mu[i])),
-            })
-            .collect();
+        let marks = minimisation_marks(log, start, end);
+        let pieces = minimisations(log, start, end);
         let panels: Vec<Panel> = STAGE_COLUMNS
             .iter()
             .filter_map(|column| {
                 let values = log.numbers(column)?;
                 Some(Panel {
                     title: label(column),
-                    x_label: "L-BFGS iteration (all AL iterations of the stage)".into(),
-                    lines: vec![Line {
-                        points: (start..end)
-                            .map(|i| ((i - start) as f64, values[i]))
-                            .collect(),
-                        dots: false,
-                    }],
+                    x_label:
+                        "row of log.csv in the stage (L-BFGS iterations of all its minimisations)"
+                            .into(),
+                    lines: pieces
+                        .iter()
+                        .map(|&(a, b)| Line {
+                            points: (a..b).map(|i| ((i - start) as f64, values[i])).collect(),
+                            dots: false,
+                        })
+                        .collect(),
                     marks: marks.clone(),
                 })
             })
             .collect();
         let svg = figures::grid(&format!("stage '{name}'"), &panels, 2)?;
-        figures.push((name, end - start, svg));
+        let (iterations, al) = iteration_counts(folder, &name, start, end);
+        figures.push((name, iterations, al, svg));
     }
     Ok(html! {
         h2 { "Convergence per stage" }
         p.note {
             "As the paper's Figs. 2–3: the data term, the kinetic energy, the penalty and the \
-             medial figures at each L-BFGS iteration (from log.csv); dashed lines mark the start \
-             of each augmented-Lagrangian iteration with its μ. Axes spanning two decades or more \
-             are logarithmic."
+             medial figures at each L-BFGS iteration (from log.csv, one row per iteration and \
+             one for the start of each minimisation). Dashed grey lines mark the start of each \
+             augmented-Lagrangian iteration with its μ; solid orange lines the switch from the \
+             coarse flow to the stage's time steps (the penalty and the medial figures jump there: \
+             the constraints now hold at the new time points too, which were not constrained \
+             before); dotted red lines a fresh start of \
+             L-BFGS within an AL iteration. The line is broken at each start. Axes spanning two \
+             decades or more are logarithmic."
         }
-        @for (name, rows, svg) in &figures {
-            h3 { "Stage '" (name) "' (" (rows) " iterations)" }
+        @for (name, iterations, al, svg) in &figures {
+            h3 { "Stage '" (name) "' (" (iterations) " L-BFGS iterations in " (al) " AL iteration" @if *al != 1 { "s" } ")" }
             @if let Some(svg) = svg { (PreEscaped(svg)) }
         }
     })

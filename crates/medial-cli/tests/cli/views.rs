@@ -62,15 +62,22 @@ max_iterations = 25
     out
 }
 
-/// Whether a check may run: `Ok(true)` if `available`, else prints why it is skipped, or fails
-/// where `MEDIAL_REQUIRE_TOOLS=1` (CI).
+/// Whether a check may run: `Ok(true)` if `available`, else says why it is skipped, or fails
+/// where `MEDIAL_REQUIRE_TOOLS=1` (CI). The line is written to the process's stderr itself, not
+/// through `eprintln!`, which the test harness captures: it shows without `--nocapture`
+/// (libtest still prints `ok` for the test).
 fn tool(available: bool, what: &str) -> bool {
+    use std::io::Write;
     if !available {
         assert!(
             std::env::var("MEDIAL_REQUIRE_TOOLS").as_deref() != Ok("1"),
             "{what} is required (MEDIAL_REQUIRE_TOOLS=1) but missing"
         );
-        println!("skipped: {what} is not installed (.ci/run installs it)");
+        let line = format!(
+            "SKIPPED a check: {what} is not installed (.ci/run installs it; MEDIAL_REQUIRE_TOOLS=1 \
+             makes this a failure)\n"
+        );
+        let _ = std::io::stderr().write_all(line.as_bytes());
     }
     available
 }
@@ -259,9 +266,11 @@ fn report_renders_in_chromium_without_console_messages() {
     for outside in ["<script", "src=", "<link", "url(", "http:", "https:"] {
         assert!(!loads.contains(outside), "the report holds {outside:?}");
     }
-    // Per stage a figure, the figures over time, the histogram.
-    assert_eq!(html.matches("<svg").count(), 4);
+    // The slices, the 3-D view, per stage a figure, the figures over time, the histogram.
+    assert_eq!(html.matches("<svg").count(), 6);
     for needle in [
+        "The model on the data",
+        "data:image/png;base64,",
         "Stage 'affine'",
         "Stage 'dice'",
         "μ = 0.2",
@@ -298,11 +307,10 @@ fn report_renders_in_chromium_without_console_messages() {
     );
 }
 
-#[test]
-fn report_command_writes_the_views_again_and_shows_extra_columns() {
-    let dir = tempfile::tempdir().unwrap();
-    // A folder of the same name: the report names its folder.
-    let copy = dir.path().join("toy");
+/// A copy of the shared fit's folder in `dir`, named `toy` as the fit's (the report names its
+/// folder).
+fn copy_fit(dir: &Path) -> PathBuf {
+    let copy = dir.join("toy");
     std::fs::create_dir_all(copy.join("flow")).unwrap();
     for entry in std::fs::read_dir(fitted())
         .unwrap()
@@ -314,6 +322,13 @@ fn report_command_writes_the_views_again_and_shows_extra_columns() {
             std::fs::copy(&path, copy.join(relative)).unwrap();
         }
     }
+    copy
+}
+
+#[test]
+fn report_command_writes_the_views_again_and_shows_extra_columns() {
+    let dir = tempfile::tempdir().unwrap();
+    let copy = copy_fit(dir.path());
     let views = [
         "report.html",
         "flow.glb",
@@ -362,4 +377,209 @@ fn report_of_a_folder_that_is_not_a_fit_is_one_line_error() {
     )
     .unwrap();
     one_line_error(&["report", s(dir.path())], 1, &["time_steps", "fit folder"]);
+}
+
+/// The number of polylines of `colour` (`#RRGGBB`) drawn 2 px wide: the sections in the slices.
+fn sections(html: &str, colour: &str) -> usize {
+    html.matches(&format!("stroke=\"{colour}\" stroke-width=\"2\""))
+        .count()
+}
+
+/// The slice panels' titles in the report.
+fn panel_titles(html: &str) -> Vec<String> {
+    let mut titles = Vec::new();
+    for when in ["start (t = 0)", "fitted (t = 1)"] {
+        for plane in ["sagittal, x = ", "coronal, y = ", "axial, z = "] {
+            let at = html
+                .find(plane)
+                .and_then(|i| html[i..].find(when).map(|j| (i, i + j + when.len())));
+            if let Some((a, b)) = at {
+                titles.push(html[a..b].to_owned());
+            }
+        }
+    }
+    titles
+}
+
+/// Issue 34: the report shows the model on the data, the toy's segmentation at three
+/// orthogonal planes with the boundary and the medial sheet cut by them, at the start and at
+/// the end, and a rendered 3-D view (a PNG that decodes, with the model's colours in it).
+#[test]
+fn report_shows_the_model_on_the_image_at_three_planes() {
+    let html = std::fs::read_to_string(fitted().join("report.html")).unwrap();
+    assert_eq!(panel_titles(&html).len(), 6, "{:?}", panel_titles(&html));
+    assert!(html.contains("target.nii.gz"));
+    // The foreground in grey; each of the six panels cuts the boundary and the medial sheet.
+    assert!(html.matches("fill=\"#C8C8C8\"").count() > 30);
+    assert!(sections(&html, "#D62728") >= 6, "boundary sections");
+    assert!(sections(&html, "#1F77B4") >= 6, "medial sections");
+    // The 3-D view: three renderings side by side, not blank.
+    let start = html.find("data:image/png;base64,").unwrap() + 22;
+    let end = start + html[start..].find('"').unwrap();
+    let png = decode_base64(&html[start..end]);
+    let mut reader = png::Decoder::new(std::io::Cursor::new(png))
+        .read_info()
+        .unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!((info.width, info.height), (900, 250));
+    let coloured = buf[..info.buffer_size()]
+        .chunks(3)
+        .filter(|p| p.iter().any(|&c| c < 200))
+        .count();
+    assert!(coloured > 900 * 250 / 10, "{coloured} pixels of the model");
+}
+
+/// Standard base64 with padding.
+fn decode_base64(text: &str) -> Vec<u8> {
+    let value = |c: u8| match c {
+        b'A'..=b'Z' => c - b'A',
+        b'a'..=b'z' => c - b'a' + 26,
+        b'0'..=b'9' => c - b'0' + 52,
+        b'+' => 62,
+        b'/' => 63,
+        _ => panic!("not base64: {c}"),
+    };
+    let mut out = Vec::new();
+    for group in text.as_bytes().chunks(4) {
+        let digits: Vec<u8> = group
+            .iter()
+            .filter(|&&c| c != b'=')
+            .map(|&c| value(c))
+            .collect();
+        let n = digits
+            .iter()
+            .enumerate()
+            .fold(0u32, |n, (k, &d)| n | u32::from(d) << (18 - 6 * k));
+        out.extend((0..digits.len() - 1).map(|k| (n >> (16 - 8 * k)) as u8));
+    }
+    out
+}
+
+/// `config.toml` of `copy` with the dice stage's target (its `image = ...` or `surface = ...`
+/// line) replaced by `line`.
+fn retarget(copy: &Path, line: &str) {
+    let config = std::fs::read_to_string(copy.join("config.toml")).unwrap();
+    let changed: Vec<String> = config
+        .lines()
+        .map(
+            |l| match l.starts_with("image = ") || l.starts_with("surface = ") {
+                true => line.to_owned(),
+                false => l.to_owned(),
+            },
+        )
+        .collect();
+    assert_ne!(
+        changed.join("\n"),
+        config.trim_end(),
+        "config.toml names no target"
+    );
+    std::fs::write(copy.join("config.toml"), changed.join("\n")).unwrap();
+}
+
+/// For a fit to a surface the same planes show the target surface's section (black) instead of
+/// the image; a target that is gone leaves the model drawn alone, with a note, and the report
+/// is still written.
+#[test]
+fn report_of_a_surface_target_and_of_a_missing_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let copy = copy_fit(dir.path());
+    let toy = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/toy");
+    let surface = toy.join("target_boundary.vtk").canonicalize().unwrap();
+    retarget(&copy, &format!("surface = {:?}", s(&surface)));
+    let o = medial(&["report", s(&copy)]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let html = std::fs::read_to_string(copy.join("report.html")).unwrap();
+    assert_eq!(panel_titles(&html).len(), 6);
+    assert!(html.contains("target_boundary.vtk"));
+    assert!(
+        !html.contains("fill=\"#C8C8C8\""),
+        "an image drawn for a surface fit"
+    );
+    assert!(sections(&html, "#000000") >= 6, "the surface's sections");
+    assert!(sections(&html, "#D62728") >= 6);
+
+    retarget(&copy, "image = \"/nonexistent/target.nii.gz\"");
+    let o = medial(&["report", s(&copy)]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let html = std::fs::read_to_string(copy.join("report.html")).unwrap();
+    assert!(html.contains("/nonexistent/target.nii.gz cannot be read"));
+    assert!(html.contains("the model is drawn alone"));
+    assert_eq!(panel_titles(&html).len(), 6);
+    assert!(sections(&html, "#D62728") >= 6);
+}
+
+/// The curves mark every start of a minimisation: each AL iteration with its μ, the switch from
+/// coarse to fine time steps, a restart; the stage's title counts its iterations as the
+/// summary's table does (not the log's rows, one more per minimisation). And an automatic
+/// fit's alignment is a table of its steps with the map.
+#[test]
+fn report_marks_the_switch_and_restarts_and_tabulates_the_alignment() {
+    let dir = tempfile::tempdir().unwrap();
+    let copy = copy_fit(dir.path());
+    // The dice stage's first AL iteration in 5 time steps, its second restarted half-way.
+    let log = std::fs::read_to_string(copy.join("log.csv")).unwrap();
+    let mut lines: Vec<Vec<String>> = log
+        .lines()
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect();
+    let header = lines[0].clone();
+    let col = |name: &str| header.iter().position(|c| c == name).unwrap();
+    let (stage, al, iteration, steps) = (
+        col("stage"),
+        col("al_iteration"),
+        col("iteration"),
+        col("time_steps"),
+    );
+    let second: Vec<usize> = (1..lines.len())
+        .filter(|&i| lines[i][stage] == "dice" && lines[i][al] == "1")
+        .collect();
+    assert!(second.len() > 4);
+    let half = second[second.len() / 2];
+    for row in lines.iter_mut().skip(1) {
+        if row[stage] == "dice" && row[al] == "0" {
+            row[steps] = "5".into();
+        }
+    }
+    for &i in second.iter().filter(|&&i| i >= half) {
+        let n: usize = lines[i][iteration].parse().unwrap();
+        let first: usize = lines[half][iteration].parse().unwrap();
+        lines[i][iteration] = (n - first).to_string();
+    }
+    let csv: String = lines.iter().map(|l| l.join(",") + "\n").collect();
+    std::fs::write(copy.join("log.csv"), csv).unwrap();
+    // An automatic fit's alignment.
+    let mut summary = read_json(&copy.join("summary.json"));
+    summary["alignment"] = serde_json::json!([
+        "initial similarity: scale 1.0383, voxel Dice 0.695 → 0.799",
+        "initial affine: anisotropy 11.3 %, voxel Dice 0.799 → 0.803"
+    ]);
+    std::fs::write(copy.join("summary.json"), summary.to_string()).unwrap();
+    std::fs::write(
+        copy.join("alignment.txt"),
+        "1.5 0 0 2\n0 1 0 0\n0 0 1 0\n0 0 0 1\n",
+    )
+    .unwrap();
+    let o = medial(&["report", s(&copy)]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let html = std::fs::read_to_string(copy.join("report.html")).unwrap();
+    for needle in [
+        "AL 1, μ = 0.02",
+        "AL 2, μ = 0.2, 5 → 10 time steps",
+        ">\nrestart\n</text>",
+        "Initial alignment",
+        "<td class=\"key\">initial affine</td><td class=\"key\">anisotropy 11.3 %, voxel Dice 0.799 → 0.803</td>",
+        "<td>1.5</td>",
+    ] {
+        assert!(html.contains(needle), "the report lacks {needle:?}");
+    }
+    for s in summary["stages"].as_array().unwrap() {
+        let (n, al) = (&s["iterations"], s["al_iterations"].as_u64().unwrap());
+        let plural = if al == 1 { "" } else { "s" };
+        let title = format!(
+            "Stage '{}' ({n} L-BFGS iterations in {al} AL iteration{plural})",
+            s["name"].as_str().unwrap()
+        );
+        assert!(html.contains(&title), "no title {title:?}");
+    }
 }
