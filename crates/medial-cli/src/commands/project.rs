@@ -43,6 +43,9 @@ struct ProjectSummary {
     max_displacement_mm: f64,
     /// Root-mean-square landmark move, mm.
     rms_displacement_mm: f64,
+    /// The spokes were turned onto the boundary before the Gauss–Newton steps (the nearest
+    /// medial configuration was out of its reach): the move is not the smallest.
+    turned_spokes: bool,
     before: Figures,
     after: Figures,
     template: TemplateSummary,
@@ -86,6 +89,7 @@ pub fn run(args: &ProjectArgs) -> Result<(), CliError> {
         seconds,
         max_displacement_mm: projection.max_displacement,
         rms_displacement_mm: projection.rms_displacement,
+        turned_spokes: projection.turned_spokes,
         before: projection.before.into(),
         after: projection.after.into(),
         template: TemplateSummary::of(&projection.template),

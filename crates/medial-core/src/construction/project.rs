@@ -25,6 +25,16 @@
 //! Iterations stop when a step moves no landmark coordinate by more than [`STEP_TOLERANCE`]` · h`
 //! at a feasible point, when no step is accepted, or after `max_iterations`. The result must
 //! then meet the tolerances of [`ProjectOptions`], otherwise the projection is an error.
+//!
+//! **When the nearest point is out of reach.** From a template far from medial (spokes tens of
+//! degrees off the boundary normal, as an inflated sheet whose triangles are small against its
+//! radius gives) the linearisation can lead to a configuration that meets the constraints with
+//! a spoke turned inside out, or none. Then the spokes are first *turned onto the boundary*:
+//! every medial point stays, every spoke keeps its atom's mean length and turns half way
+//! towards the boundary's Loop normal at its tip, repeatedly ([`TURN_ROUNDS`] at most) — a
+//! fixed point of this map is medial, spokes along the normal and of one length per atom — and
+//! the Gauss–Newton projection continues from there. This move is not the smallest; the
+//! [`Projection`] says it was taken ([`Projection::turned_spokes`]).
 
 use crate::mesh::Bounds;
 use crate::model::constraints::MedialConstraints;
@@ -47,6 +57,11 @@ const CG_TOLERANCE: f64 = 1e-12;
 
 /// Most step halvings tried before a Gauss–Newton step is given up.
 const MAX_HALVINGS: usize = 30;
+
+/// Most rounds of turning the spokes onto the boundary normal before the Gauss–Newton
+/// projection continues (each round halves the angle where the normal itself moves little:
+/// 200 rounds bring 45° to far below the tolerance).
+pub const TURN_ROUNDS: usize = 200;
 
 /// Tolerances and limits of [`project`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -120,6 +135,9 @@ pub struct Projection {
     pub max_displacement: f64,
     /// Root-mean-square landmark displacement `sqrt(|q − q⁰|² / k)`, mm.
     pub rms_displacement: f64,
+    /// Whether the spokes were turned onto the boundary first (the Gauss–Newton projection
+    /// from the given landmarks missed the tolerances; see the module documentation).
+    pub turned_spokes: bool,
 }
 
 /// Moves the landmarks of `template` as little as possible (least squares, all landmarks
@@ -131,22 +149,24 @@ pub struct Projection {
 pub fn project(template: &MedialTemplate, options: &ProjectOptions) -> Result<Projection> {
     check_options(options)?;
     let constraints = MedialConstraints::new(template);
-    let q0 = flatten(template.landmarks());
-    let h = bounding_diagonal(template.landmarks());
-    let solver = Solver {
-        constraints: &constraints,
-        q0: &q0,
-        feasible: FEASIBLE * h * h,
-    };
-    let (q, iterations) = solver.run(options.max_iterations, STEP_TOLERANCE * h);
-    let points = unflatten(&q);
+    let given = template.landmarks();
+    let (mut points, mut iterations) = gauss_newton(&constraints, given, options);
+    let mut after = ConstraintFigures::of(template, &constraints, &points);
+    let mut turned_spokes = false;
+    if !after.meets(options) {
+        let turned = turn_spokes(template, given, &constraints, options);
+        let (p, i) = gauss_newton(&constraints, &turned, options);
+        let figures = ConstraintFigures::of(template, &constraints, &p);
+        if figures.meets(options) {
+            (points, iterations, after, turned_spokes) = (p, i, figures, true);
+        }
+    }
     let projected = template.with_landmarks(&points).map_err(|e| {
         Error::Optimisation(format!(
             "projection diverged after {iterations} iterations: {e}"
         ))
     })?;
-    let before = ConstraintFigures::of(template, &constraints, template.landmarks());
-    let after = ConstraintFigures::of(template, &constraints, &points);
+    let before = ConstraintFigures::of(template, &constraints, given);
     if !after.meets(options) {
         return Err(Error::Optimisation(format!(
             "projection onto the medial constraints stopped after {iterations} iterations at \
@@ -173,7 +193,64 @@ pub fn project(template: &MedialTemplate, options: &ProjectOptions) -> Result<Pr
         after,
         max_displacement: moves.iter().copied().fold(0.0, f64::max),
         rms_displacement: (moves.iter().map(|d| d * d).sum::<f64>() / moves.len() as f64).sqrt(),
+        turned_spokes,
     })
+}
+
+/// The Gauss–Newton projection from the landmarks `start` (module documentation): the
+/// landmarks reached and the iterations taken.
+fn gauss_newton(
+    constraints: &MedialConstraints,
+    start: &[Vec3],
+    options: &ProjectOptions,
+) -> (Vec<Vec3>, usize) {
+    let q0 = flatten(start);
+    let h = bounding_diagonal(start);
+    let solver = Solver {
+        constraints,
+        q0: &q0,
+        feasible: FEASIBLE * h * h,
+    };
+    let (q, iterations) = solver.run(options.max_iterations, STEP_TOLERANCE * h);
+    (unflatten(&q), iterations)
+}
+
+/// The spokes of `template` at landmarks `q` turned onto the boundary (module documentation):
+/// medial points kept, every spoke `s_b` of atom `m` replaced by `ℓ_m · normalize(ŝ_b + n̂_b)`
+/// (`ℓ_m` the atom's mean spoke length, `n̂_b` the Loop normal) until the largest spoke–normal
+/// angle is a tenth of the tolerance, or after [`TURN_ROUNDS`].
+fn turn_spokes(
+    template: &MedialTemplate,
+    q: &[Vec3],
+    constraints: &MedialConstraints,
+    options: &ProjectOptions,
+) -> Vec<Vec3> {
+    let mut q = q.to_vec();
+    let atoms = template.medial_index();
+    let mean_length: Vec<f64> = (0..template.medial_count())
+        .map(|m| {
+            let spokes = template.spokes(m);
+            let centre = q[template.atom_landmark(m)];
+            spokes.iter().map(|&b| (q[b] - centre).norm()).sum::<f64>() / spokes.len() as f64
+        })
+        .collect();
+    for _ in 0..TURN_ROUNDS {
+        if ConstraintFigures::of(template, constraints, &q).max_spoke_normal_deg
+            <= 0.1 * options.max_spoke_normal_deg
+        {
+            break;
+        }
+        let normals = template.tangents().normals(&q);
+        for (b, normal) in normals.iter().enumerate() {
+            let m = atoms[b];
+            let centre = q[template.atom_landmark(m)];
+            let direction = ((q[b] - centre).normalize() + normal).normalize();
+            if direction.iter().all(|c| c.is_finite()) {
+                q[b] = centre + direction * mean_length[m];
+            }
+        }
+    }
+    q
 }
 
 fn check_options(options: &ProjectOptions) -> Result<()> {

@@ -6,10 +6,19 @@
 //! - the Dice estimate leaves `[0, 1]` (it does when the model's volume turns negative);
 //! - the objective exceeds [`DIVERGED`] times the magnitude of the stage's starting value;
 //! - the model folds. For a medial template each boundary triangle `(b₀, b₁, b₂)` and the
-//!   medial points `(m₀, m₁, m₂)` of its atoms bound a prism, cut into the tetrahedra
-//!   `(b₀ b₁ b₂ m₀)`, `(b₁ b₂ m₀ m₁)`, `(b₂ m₀ m₁ m₂)`; a prism is folded when the sum of their
-//!   signed volumes `det[p₁ − p₀, p₂ − p₀, p₃ − p₀] / 6` has the opposite sign of the same sum
-//!   at `t = 0`. For a plain mesh, or the boundary alone ([`Guard::of_surface`]), a triangle is
+//!   medial points `(m₀, m₁, m₂)` of its atoms bound a prism with spokes `s_i = b_i − m_i`.
+//!   The prism is folded when the signed volume of the prism (the sum of the tetrahedra
+//!   `(b₀ b₁ b₂ m₀)`, `(b₁ b₂ m₀ m₁)`, `(b₂ m₀ m₁ m₂)`) or the side of its boundary triangle one
+//!   of its spokes is on (`n_B · s_i`, `n_B = (b₁ − b₀) × (b₂ − b₀)`, `s_i = b_i − m_i`) has the
+//!   opposite sign of the same figure at `t = 0`: the boundary passes through the medial sheet
+//!   or the sheet through the boundary. A figure is judged only where its sign at the start
+//!   means something: the volume of a prism that is not a sliver ([`SLIVER`]: long spokes over
+//!   a small or skewed triangle, as at the rim of a finely sampled sheet, whose volume changes
+//!   sign under smooth maps that fold nothing), the side of a spoke that is not nearly in its
+//!   triangle's plane ([`EDGE_ON`]); every spoke of a sliver is still judged against its
+//!   boundary triangle unless edge-on, and every boundary point is a corner of several prisms
+//!   (docs/decisions/0032-fold-test-for-slivers.md).
+//!   For a plain mesh, or the boundary alone ([`Guard::of_surface`]), a triangle is
 //!   inverted when its normal `(p_b − p_a) × (p_c − p_a)` turns against its normal at `t = 0`
 //!   (negative dot product).
 //!
@@ -44,6 +53,10 @@ pub enum Unsound {
         folded: usize,
         /// All prisms (boundary triangles).
         of: usize,
+        /// The atom of the first folded prism's first corner.
+        atom: usize,
+        /// The centre of that prism's boundary triangle at the end of the flow, mm.
+        at: [f64; 3],
     },
     /// Boundary triangles whose orientation flipped (plain meshes).
     InvertedTriangles {
@@ -68,9 +81,16 @@ impl std::fmt::Display for Unsound {
                 f,
                 "the objective diverged ({total:.3e}, from {start:.3e} at the start of the stage)"
             ),
-            Unsound::FoldedPrisms { folded, of } => write!(
+            Unsound::FoldedPrisms {
+                folded,
+                of,
+                atom,
+                at,
+            } => write!(
                 f,
-                "the model folds: {folded} of {of} boundary–medial prisms turned inside out"
+                "the model folds: {folded} of {of} boundary–medial prisms turned inside out, \
+                 the first at atom {atom} near ({:.1}, {:.1}, {:.1}) mm",
+                at[0], at[1], at[2]
             ),
             Unsound::InvertedTriangles { inverted, of } => write!(
                 f,
@@ -90,9 +110,10 @@ pub struct Guard {
 
 #[derive(Clone, Debug)]
 enum Cells {
-    /// Medial template: per boundary triangle, the landmarks `[b₀, b₁, b₂, m₀, m₁, m₂]` and the
-    /// sign of its prism's volume at `t = 0` (0 for a degenerate prism, never flagged).
-    Prisms(Vec<([usize; 6], f64)>),
+    /// Medial template: per boundary triangle, the landmarks `[b₀, b₁, b₂, m₀, m₁, m₂]`, the
+    /// sides of its boundary and medial triangles its spokes are on at `t = 0`
+    /// ([`Facing::start`]; 0 for one not judged), and the atom of `b₀`.
+    Prisms(Vec<([usize; 6], Facing, usize)>),
     /// Plain mesh: triangles and their normals at `t = 0`.
     Triangles(Vec<([usize; 3], Vec3)>),
 }
@@ -133,7 +154,7 @@ impl Guard {
             .map(|&[a, b, c]| {
                 let m = |v: usize| template.atom_landmark(atom[v]);
                 let corners = [a, b, c, m(a), m(b), m(c)];
-                (corners, prism_volume(q, &corners).signum())
+                (corners, Facing::start(q, &corners), atom[a])
             })
             .collect();
         Self {
@@ -145,17 +166,19 @@ impl Guard {
     pub fn check_fold(&self, q: &[Vec3]) -> Result<(), Unsound> {
         match &self.cells {
             Cells::Prisms(prisms) => {
-                let folded = prisms
+                let mut folded = prisms
                     .iter()
-                    .filter(|(corners, sign)| prism_volume(q, corners) * sign < 0.0)
-                    .count();
-                match folded {
-                    0 => Ok(()),
-                    folded => Err(Unsound::FoldedPrisms {
-                        folded,
-                        of: prisms.len(),
-                    }),
-                }
+                    .filter(|(corners, start, _)| Facing::of(q, corners).turned_against(start));
+                let Some((first, _, atom)) = folded.next() else {
+                    return Ok(());
+                };
+                let at = (q[first[0]] + q[first[1]] + q[first[2]]) / 3.0;
+                Err(Unsound::FoldedPrisms {
+                    folded: 1 + folded.count(),
+                    of: prisms.len(),
+                    atom: *atom,
+                    at: [at.x, at.y, at.z],
+                })
             }
             Cells::Triangles(triangles) => {
                 let inverted = triangles
@@ -205,7 +228,67 @@ pub fn check(guard: Option<&Guard>, e: &Evaluation, start: f64) -> Result<(), Un
     guard.map_or(Ok(()), |g| g.check_fold(&e.final_positions))
 }
 
-/// Signed volume of a prism `[b₀, b₁, b₂, m₀, m₁, m₂]`: the sum of its three tetrahedra.
+/// A spoke that makes `|cos| <` this with the normal of its boundary triangle at `t = 0` lies
+/// within about 11.5° of the triangle's plane (a sliver triangle, or one edge-on to its
+/// spokes): which side it is on is not judged there.
+pub const EDGE_ON: f64 = 0.2;
+
+/// A prism whose volume at `t = 0` is below this fraction of `A·h` (its boundary triangle's
+/// area times its mean spoke length: the volume of the right prism on that triangle) is a
+/// sliver: the sign of its volume is not judged.
+pub const SLIVER: f64 = 0.2;
+
+/// The orientation of a prism `[b₀, b₁, b₂, m₀, m₁, m₂]` with spokes `s_i = b_i − m_i`: its
+/// signed volume (mm³) and the side of its boundary triangle each spoke is on, `n_B · s_i`
+/// with `n_B = (b₁ − b₀) × (b₂ − b₀)` (mm³); or their signs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Facing {
+    volume: f64,
+    spokes: [f64; 3],
+}
+
+impl Facing {
+    fn of(q: &[Vec3], c: &[usize; 6]) -> Self {
+        let n = normal(q, [c[0], c[1], c[2]]);
+        Self {
+            volume: prism_volume(q, c),
+            spokes: [0, 1, 2].map(|i| n.dot(&(q[c[i]] - q[c[i + 3]]))),
+        }
+    }
+
+    /// The signs of [`Facing::of`] at `t = 0`; 0 for what is not judged: the volume of a
+    /// [`SLIVER`], a spoke within [`EDGE_ON`] of its boundary triangle's plane.
+    fn start(q: &[Vec3], c: &[usize; 6]) -> Self {
+        let n = normal(q, [c[0], c[1], c[2]]);
+        let spokes = [0, 1, 2].map(|i| q[c[i]] - q[c[i + 3]]);
+        let mean_spoke = spokes.iter().map(|s| s.norm()).sum::<f64>() / 3.0;
+        let volume = prism_volume(q, c);
+        let judged = |v: f64, scale: f64| {
+            if v.abs() >= scale && v != 0.0 {
+                v.signum()
+            } else {
+                0.0
+            }
+        };
+        Self {
+            volume: judged(volume, SLIVER * 0.5 * n.norm() * mean_spoke),
+            spokes: spokes.map(|s| judged(n.dot(&s), EDGE_ON * n.norm() * s.norm())),
+        }
+    }
+
+    /// The volume or a spoke's side has the other sign than `start` says.
+    fn turned_against(self, start: &Facing) -> bool {
+        self.volume * start.volume < 0.0
+            || self
+                .spokes
+                .iter()
+                .zip(start.spokes)
+                .any(|(a, b)| a * b < 0.0)
+    }
+}
+
+/// Signed volume of a prism `[b₀, b₁, b₂, m₀, m₁, m₂]`: the sum of its three tetrahedra
+/// `(b₀ b₁ b₂ m₀)`, `(b₁ b₂ m₀ m₁)`, `(b₂ m₀ m₁ m₂)`.
 fn prism_volume(q: &[Vec3], c: &[usize; 6]) -> f64 {
     let vol = |a: usize, b: usize, d: usize, e: usize| {
         (q[b] - q[a]).cross(&(q[d] - q[a])).dot(&(q[e] - q[a])) / 6.0
@@ -222,7 +305,7 @@ fn normal(p: &[Vec3], [a, b, c]: [usize; 3]) -> Vec3 {
 mod tests {
     use super::*;
     use crate::testing::meshes::{bipyramid, octahedron};
-    use crate::TriMesh;
+    use crate::{MedialTemplate, TriMesh};
 
     fn evaluation(q: &[Vec3]) -> Evaluation {
         Evaluation {
@@ -242,12 +325,91 @@ mod tests {
         let r = nalgebra::Rotation3::from_euler_angles(0.3, -0.2, 1.0);
         let moved: Vec<Vec3> = q.iter().map(|p| r * p * 2.5).collect();
         assert_eq!(guard.check_fold(&moved), Ok(()));
-        // The top apex pushed through the medial sheet: its six prisms turn inside out.
+        // The top apex pushed through the medial sheet: its six prisms turn inside out, the
+        // first (triangle 0, of atom 0) centred at the mean of the apex and two rim points.
         q[0].z = -0.2;
-        assert_eq!(
-            guard.check_fold(&q),
-            Err(Unsound::FoldedPrisms { folded: 6, of: 12 })
+        let Err(Unsound::FoldedPrisms {
+            folded,
+            of,
+            atom,
+            at,
+        }) = guard.check_fold(&q)
+        else {
+            panic!("the pushed apex must fold the model");
+        };
+        assert_eq!((folded, of, atom), (6, 12, 0));
+        let expected = (q[0] + q[2] + q[3]) / 3.0;
+        assert!((Vec3::from(at) - expected).norm() < 1e-12);
+        let message = guard.check_fold(&q).unwrap_err().to_string();
+        assert!(
+            message.contains("at atom 0 near (0.8, 0.4, -0.1) mm"),
+            "{message}"
         );
+    }
+
+    /// A sliver prism: a medial triangle 0.05 wide under spokes 2 long, whose top boundary
+    /// triangle stands nearly edge-on to its spokes. Its tip swinging 0.1 across (a smooth map
+    /// need not be affine over the spokes' length) flips the prism's volume and its top's
+    /// facing but folds nothing; a spoke pushed through the sheet is caught by the well-shaped
+    /// neighbour.
+    #[test]
+    fn a_sliver_is_not_judged_by_its_volume_and_a_real_fold_still_is() {
+        let medial = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.5, 0.05, 0.0),
+            Vec3::new(0.5, -1.0, 0.0),
+        ];
+        let mut boundary: Vec<Vec3> = medial.iter().map(|m| m + Vec3::z() * 2.0).collect();
+        boundary[2].z = 3.0;
+        boundary.extend(medial.iter().map(|m| m - Vec3::z() * 2.0));
+        let triangles = vec![
+            [0, 1, 2],
+            [0, 3, 1],
+            [4, 6, 5],
+            [4, 5, 7],
+            [1, 3, 7],
+            [1, 7, 5],
+            [3, 0, 4],
+            [3, 4, 7],
+            [0, 2, 6],
+            [0, 6, 4],
+            [2, 1, 5],
+            [2, 5, 6],
+        ];
+        let mesh = TriMesh::new(boundary, triangles).unwrap();
+        let template = MedialTemplate::new(mesh, vec![0, 1, 2, 3, 0, 1, 2, 3], medial).unwrap();
+        let guard = Guard::of_template(&template);
+        let Cells::Prisms(prisms) = &guard.cells else {
+            panic!("a medial template has prisms");
+        };
+        let (sliver, neighbour) = (prisms[0].1, prisms[1].1);
+        assert_eq!(
+            (sliver.volume, sliver.spokes),
+            (0.0, [0.0; 3]),
+            "not judged"
+        );
+        assert_eq!((neighbour.volume, neighbour.spokes), (-1.0, [1.0; 3]));
+        // The sliver's tip swung across: its volume and its top's facing flip, nothing folds.
+        let mut q = template.landmarks().to_vec();
+        q[2].y = -0.05;
+        let (before, swung) = (
+            Facing::of(template.landmarks(), &prisms[0].0),
+            Facing::of(&q, &prisms[0].0),
+        );
+        assert!(before.volume * swung.volume < 0.0);
+        assert!(swung
+            .spokes
+            .iter()
+            .zip(before.spokes)
+            .all(|(a, b)| a * b < 0.0));
+        assert_eq!(guard.check_fold(&q), Ok(()));
+        // Atom 0's top spoke pushed through the sheet.
+        q[0].z = -0.5;
+        assert!(matches!(
+            guard.check_fold(&q),
+            Err(Unsound::FoldedPrisms { atom: 0, .. })
+        ));
     }
 
     #[test]
