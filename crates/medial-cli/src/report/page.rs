@@ -1,4 +1,4 @@
-//! `report.html`: one self-contained page (inline CSS and SVG, no script, nothing loaded) with
+//! `report.html`: one self-contained page (inline CSS, SVG and PNG, no script, nothing loaded) with
 //! the figures and tables of a fit folder.
 
 use super::figures::{self, Counted, Line, Mark, MarkKind, Panel};

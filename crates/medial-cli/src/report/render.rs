@@ -78,6 +78,12 @@ impl Camera {
     }
 }
 
+/// Pixels from a triangle's edge drawn darker (at the canvas's size).
+const EDGE: f64 = 2.0;
+
+/// The brightness of a triangle near its edges, against its inside.
+const EDGE_SHADE: f64 = 0.8;
+
 /// An RGB image with a depth per pixel.
 pub struct Canvas {
     /// Pixels across.
@@ -101,10 +107,11 @@ impl Canvas {
     }
 
     /// Draws the triangles of `mesh` seen by `camera`, triangle `t` in `colour(t)` shaded by
-    /// the angle of its normal with the light (a headlight a little above and left of the
-    /// viewer, both sides lit): only the nearest surface shows at each pixel.
+    /// the angle of its normal with the light (above and left of the viewer, both sides lit),
+    /// darker within [`EDGE`] pixels of its edges (the mesh's lines): only the nearest surface
+    /// shows at each pixel.
     pub fn draw(&mut self, mesh: &TriMesh, camera: &Camera, colour: impl Fn(usize) -> [f64; 3]) {
-        let light = (camera.toward + 0.45 * camera.up - 0.3 * camera.right).normalize();
+        let light = (camera.toward + 0.6 * camera.up - 0.5 * camera.right).normalize();
         let points = mesh.points();
         for (t, corners) in mesh.triangles().iter().enumerate() {
             let [a, b, c] = corners.map(|i| points[i]);
@@ -113,7 +120,7 @@ impl Canvas {
             if norm.is_nan() || norm <= 0.0 {
                 continue;
             }
-            let shade = 0.28 + 0.72 * (normal.dot(&light) / norm).abs();
+            let shade = 0.2 + 0.8 * (normal.dot(&light) / norm).abs();
             let rgb = colour(t).map(|c| (255.0 * (c * shade).clamp(0.0, 1.0)).round() as u8);
             let q = corners.map(|i| camera.project(&points[i], self.width, self.height));
             self.fill(q, rgb);
@@ -121,8 +128,10 @@ impl Canvas {
     }
 
     /// Fills the projected triangle `q` (pixel x, y and depth of each corner) where it is
-    /// nearer than what is drawn, testing pixel centres.
+    /// nearer than what is drawn, testing pixel centres; within [`EDGE`] pixels of an edge,
+    /// [`EDGE_SHADE`] as bright.
     fn fill(&mut self, q: [[f64; 3]; 3], rgb: [u8; 3]) {
+        let edge_rgb = rgb.map(|c| (f64::from(c) * EDGE_SHADE).round() as u8);
         let area =
             (q[1][0] - q[0][0]) * (q[2][1] - q[0][1]) - (q[2][0] - q[0][0]) * (q[1][1] - q[0][1]);
         if area == 0.0 || !area.is_finite() {
@@ -139,6 +148,9 @@ impl Canvas {
             clip(lo(1).floor(), self.height),
             clip(hi(1).ceil(), self.height),
         );
+        let side = |i: usize, j: usize| (q[j][0] - q[i][0]).hypot(q[j][1] - q[i][1]);
+        // The height of the triangle over the edge opposite each corner, pixels.
+        let heights = [side(1, 2), side(2, 0), side(0, 1)].map(|s| area.abs() / s);
         for y in y0..y1 {
             for x in x0..x1 {
                 let (px, py) = (x as f64 + 0.5, y as f64 + 0.5);
@@ -154,7 +166,9 @@ impl Canvas {
                 let n = x + self.width * y;
                 if depth > self.depth[n] {
                     self.depth[n] = depth;
-                    self.rgb[3 * n..3 * n + 3].copy_from_slice(&rgb);
+                    let near = (0..3).any(|k| w[k] * heights[k] < EDGE);
+                    let colour = if near { &edge_rgb } else { &rgb };
+                    self.rgb[3 * n..3 * n + 3].copy_from_slice(colour);
                 }
             }
         }
@@ -244,7 +258,7 @@ mod tests {
             let n = 3 * (i as usize + 40 * j as usize);
             [canvas.rgb[n], canvas.rgb[n + 1], canvas.rgb[n + 2]]
         };
-        let lit = (255.0 * (0.28 + 0.72 * (1.0 / (1.0f64 + 0.45 * 0.45 + 0.09).sqrt()))).round();
+        let lit = (255.0 * (0.2 + 0.8 * (1.0 / (1.0f64 + 0.36 + 0.25).sqrt()))).round();
         assert_eq!(pixel(0.5, 1.0), [0, 0, lit as u8]); // the blue square alone
         assert_eq!(pixel(1.5, 1.0), [lit as u8, 0, 0]); // both: the red one in front
         assert_eq!(pixel(2.5, 1.0), [lit as u8, 0, 0]);
