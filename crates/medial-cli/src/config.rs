@@ -556,6 +556,19 @@ impl Config {
         }
     }
 
+    /// This config with the flow and stage settings of `spec` (same template, sources and
+    /// output); `spec` has this config's stages, in order.
+    pub fn with_spec(&self, spec: &FitSpec) -> Result<Self, CliError> {
+        let sources = (self.stages.iter())
+            .map(StageConfig::source)
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(CliError::Input)?;
+        Ok(Self {
+            output: self.output,
+            ..Self::of_spec(spec, self.model.template.clone(), sources)
+        })
+    }
+
     /// The engine's description of the fit.
     pub fn spec(&self) -> FitSpec {
         FitSpec {

@@ -14,6 +14,7 @@ use crate::signals::{Signal, Signals};
 use crate::stage::{self, flow_of};
 use crate::summary::{Figures, StageSummary, Status, Summary};
 use crate::time_points::{self, time_points};
+use medial_core::fit::plan;
 use medial_core::fit::{
     run_stages_resumable, Checkpoint, FitEvent, FitRun, PlannedStage, PreparedStage, StageOutcome,
     Target,
@@ -270,43 +271,70 @@ bits.\n";
 /// results (marked in `summary.json`'s `status`) and then returns the error that says so; so
 /// does a fit stopped by SIGINT or SIGTERM, which also writes its checkpoint.
 pub fn run(resolved: &Resolved, options: &FitOptions) -> Result<Summary, CliError> {
-    let config = &resolved.config;
     let model = match &resolved.start {
         Some(start) => start.model.clone(),
-        None => medial_io::model::read_model(&config.model.template)?,
+        None => medial_io::model::read_model(&resolved.config.model.template)?,
     };
-    let flow = flow_of(config, model.landmarks().len())?;
-    let prepared = stage::prepare_all(config, &model)?;
-    let with_choices = stage::with_choices(config, &prepared);
-    let config = &with_choices;
-    let engine = medial_core::fit::run::Fit::new(model, flow, prepared);
-    let planned = engine.planned();
-    let fit = Fit {
-        config,
-        options,
-        model: engine.model(),
-        flow: engine.flow(),
-        prepared: engine.stages(),
-        planned: &planned,
-        alignment: resolved.start.as_ref().map_or(&[], |s| &s.notes),
-    };
-    let (resumed, fingerprint) = if options.resume {
-        let fingerprint = Fingerprint::of(config)?;
-        let path = options.out.join(checkpoint::FILE);
-        (
-            Some(Saved::read_for(&path, &fingerprint)?),
-            Some(fingerprint),
-        )
-    } else {
-        (None, None)
-    };
-    let mut set = ResultSet::begin(&options.out)?;
-    if let Some(start) = &resolved.start {
-        write_start(&mut set, start)?;
+    let mut config = resolved.config.clone();
+    let mut retries = Vec::new();
+    let mut set = None;
+    loop {
+        let flow = flow_of(&config, model.landmarks().len())?;
+        let prepared = stage::prepare_all(&config, &model)?;
+        let with_choices = stage::with_choices(&config, &prepared);
+        let engine = medial_core::fit::run::Fit::new(model.clone(), flow, prepared);
+        let planned = engine.planned();
+        let fit = Fit {
+            config: &with_choices,
+            options,
+            model: engine.model(),
+            flow: engine.flow(),
+            prepared: engine.stages(),
+            planned: &planned,
+            alignment: resolved.start.as_ref().map_or(&[], |s| &s.notes),
+            retries: &retries,
+        };
+        let (resumed, fingerprint) = if options.resume {
+            let fingerprint = Fingerprint::of(&with_choices)?;
+            let path = options.out.join(checkpoint::FILE);
+            (
+                Some(Saved::read_for(&path, &fingerprint)?),
+                Some(fingerprint),
+            )
+        } else {
+            (None, None)
+        };
+        if set.is_none() {
+            let mut begun = ResultSet::begin(&options.out)?;
+            if let Some(start) = &resolved.start {
+                write_start(&mut begun, start)?;
+            }
+            set = Some(begun);
+        }
+        let ended = fit.optimise(resumed, fingerprint)?;
+        // An automatic fit that ends unsound runs again from its start with safer settings
+        // (the engine's rule); a fit from a config runs as it was written.
+        let retry = match (&resolved.start, ended.unsound_cause()) {
+            (Some(_), Some(cause)) if !options.resume => {
+                plan::safer(&with_choices.spec(), model.landmarks(), retries.len() + 1)
+                    .map(|safer| (cause, safer))
+            }
+            _ => None,
+        };
+        if let Some((cause, safer)) = retry {
+            let line = format!("the fit ended unsound ({cause}); {}", safer.why);
+            tracing::info!("{line}");
+            retries.push(line);
+            config = with_choices.with_spec(&safer.spec)?;
+            continue;
+        }
+        let mut set = set.expect("begun before the first run");
+        write_text(
+            &set.file("config.toml")?,
+            &with_choices.to_toml(RESOLVED_HEADER)?,
+        )?;
+        return fit.write_set(set, ended);
     }
-    write_text(&set.file("config.toml")?, &config.to_toml(RESOLVED_HEADER)?)?;
-    let ended = fit.optimise(resumed, fingerprint)?;
-    fit.write_set(set, ended)
 }
 
 /// What a fit runs: its config and options, the model and its flow, the prepared stages and
@@ -320,6 +348,8 @@ struct Fit<'a> {
     planned: &'a [PlannedStage<'a>],
     /// An automatic fit's alignment notes ([`Start::notes`]).
     alignment: &'a [String],
+    /// The runs of an automatic fit that ended unsound before this one, and why it ran again.
+    retries: &'a [String],
 }
 
 /// How the optimisation of a fit ended.
@@ -333,6 +363,17 @@ struct Ended {
     log: Log,
     /// The signal that stopped the fit, and its checkpoint.
     interrupted: Option<(Signal, Saved)>,
+}
+
+impl Ended {
+    /// Why the fit ended unsound, when it ran to its end and did.
+    fn unsound_cause(&self) -> Option<String> {
+        if self.interrupted.is_some() {
+            return None;
+        }
+        let last = self.outcomes.last()?;
+        last.unsound.as_ref().map(|u| u.cause.to_string())
+    }
 }
 
 /// Wall-clock seconds since a start, after `before` seconds of earlier runs.
@@ -547,7 +588,13 @@ impl Fit<'_> {
                 let status = status_of(&stages[last]);
                 (
                     status,
-                    failure(status, &stages[last], cfg, &self.options.out),
+                    failure(
+                        status,
+                        &stages[last],
+                        cfg,
+                        &self.options.out,
+                        self.retries.len(),
+                    ),
                 )
             }
         };
@@ -623,6 +670,7 @@ impl Fit<'_> {
             step_strains,
             stages,
             alignment: self.alignment.to_vec(),
+            retries: self.retries.to_vec(),
             files: Vec::new(),
         }
     }
@@ -750,13 +798,29 @@ fn judge_flow(
 
 /// The error a fit that ended `status` returns once its results are written (none for a
 /// sound fit within its tolerances).
-fn failure(status: Status, last: &StageSummary, cfg: &StageConfig, out: &Path) -> Option<CliError> {
+/// `retried`: the runs of an automatic fit before this one that ended unsound.
+fn failure(
+    status: Status,
+    last: &StageSummary,
+    cfg: &StageConfig,
+    out: &Path,
+    retried: usize,
+) -> Option<CliError> {
     let written = format!("results written to {} (status \"", out.display());
     match status {
         Status::Unsound => Some(CliError::Unsound(format!(
-            "stage '{}', {}; {written}unsound\", the last sound iterate)",
+            "stage '{}', {}; {written}unsound\", the last sound iterate){}",
             last.name,
-            last.unsound.as_deref().unwrap_or_default()
+            last.unsound.as_deref().unwrap_or_default(),
+            match retried {
+                0 => "; to try: twice the time steps without coarse steps, a 1.5× wider sigma, \
+                      a nearer start (docs/troubleshooting.md)"
+                    .to_string(),
+                n => format!(
+                    ", after {n} more runs with safer settings (summary.json: retries); to try: \
+                     a nearer start (docs/troubleshooting.md)"
+                ),
+            }
         ))),
         Status::ConstraintsNotMet => Some(CliError::ConstraintsNotMet(format!(
             "stage '{}': the medial constraints are not met (max spoke–normal {:.3}°, max \

@@ -172,6 +172,9 @@ pub struct Summary {
     /// anisotropy, overlap before and after, the projection's moves, a fallback and its reason).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub alignment: Vec<String>,
+    /// An automatic fit that ended unsound and ran again with safer settings: one line per
+    /// run before this one (why it ended, what changed); empty when it ran once.
+    pub retries: Vec<String>,
     /// The other files of this set of results (paths relative to the folder, sorted): all in
     /// place once `summary.json` is ([`crate::results`]).
     pub files: Vec<String>,

@@ -7,16 +7,12 @@
 //! - the objective exceeds [`DIVERGED`] times the magnitude of the stage's starting value;
 //! - the model folds. For a medial template each boundary triangle `(b₀, b₁, b₂)` and the
 //!   medial points `(m₀, m₁, m₂)` of its atoms bound a prism with spokes `s_i = b_i − m_i`.
-//!   The prism is folded when the signed volume of the prism (the sum of the tetrahedra
-//!   `(b₀ b₁ b₂ m₀)`, `(b₁ b₂ m₀ m₁)`, `(b₂ m₀ m₁ m₂)`) or the side of its boundary triangle one
-//!   of its spokes is on (`n_B · s_i`, `n_B = (b₁ − b₀) × (b₂ − b₀)`, `s_i = b_i − m_i`) has the
-//!   opposite sign of the same figure at `t = 0`: the boundary passes through the medial sheet
-//!   or the sheet through the boundary. A figure is judged only where its sign at the start
-//!   means something: the volume of a prism that is not a sliver ([`SLIVER`]: long spokes over
-//!   a small or skewed triangle, as at the rim of a finely sampled sheet, whose volume changes
-//!   sign under smooth maps that fold nothing), the side of a spoke that is not nearly in its
-//!   triangle's plane ([`EDGE_ON`]); every spoke of a sliver is still judged against its
-//!   boundary triangle unless edge-on, and every boundary point is a corner of several prisms
+//!   A prism is folded when its signed volume, the sum of the tetrahedra `(b₀ b₁ b₂ m₀)`,
+//!   `(b₁ b₂ m₀ m₁)`, `(b₂ m₀ m₁ m₂)`, has the opposite sign of the same sum at `t = 0`: the
+//!   boundary passes through the medial sheet or the sheet through the boundary. A prism that
+//!   is a sliver at `t = 0` ([`SLIVER`]: long spokes over a small or skewed triangle, as at the
+//!   rim of a finely sampled sheet) is not judged: the sign of its volume changes under smooth
+//!   maps that fold nothing. Its corners are corners of other prisms, which are
 //!   (docs/decisions/0032-fold-test-for-slivers.md).
 //!   For a plain mesh, or the boundary alone ([`Guard::of_surface`]), a triangle is
 //!   inverted when its normal `(p_b − p_a) × (p_c − p_a)` turns against its normal at `t = 0`
@@ -111,9 +107,9 @@ pub struct Guard {
 #[derive(Clone, Debug)]
 enum Cells {
     /// Medial template: per boundary triangle, the landmarks `[b₀, b₁, b₂, m₀, m₁, m₂]`, the
-    /// sides of its boundary and medial triangles its spokes are on at `t = 0`
-    /// ([`Facing::start`]; 0 for one not judged), and the atom of `b₀`.
-    Prisms(Vec<([usize; 6], Facing, usize)>),
+    /// sign of its prism's volume at `t = 0` ([`judged_sign`]: 0 for a sliver or a degenerate
+    /// prism, never flagged), and the atom of `b₀`.
+    Prisms(Vec<([usize; 6], f64, usize)>),
     /// Plain mesh: triangles and their normals at `t = 0`.
     Triangles(Vec<([usize; 3], Vec3)>),
 }
@@ -154,7 +150,7 @@ impl Guard {
             .map(|&[a, b, c]| {
                 let m = |v: usize| template.atom_landmark(atom[v]);
                 let corners = [a, b, c, m(a), m(b), m(c)];
-                (corners, Facing::start(q, &corners), atom[a])
+                (corners, judged_sign(q, &corners), atom[a])
             })
             .collect();
         Self {
@@ -168,7 +164,7 @@ impl Guard {
             Cells::Prisms(prisms) => {
                 let mut folded = prisms
                     .iter()
-                    .filter(|(corners, start, _)| Facing::of(q, corners).turned_against(start));
+                    .filter(|(corners, sign, _)| prism_volume(q, corners) * sign < 0.0);
                 let Some((first, _, atom)) = folded.next() else {
                     return Ok(());
                 };
@@ -228,62 +224,20 @@ pub fn check(guard: Option<&Guard>, e: &Evaluation, start: f64) -> Result<(), Un
     guard.map_or(Ok(()), |g| g.check_fold(&e.final_positions))
 }
 
-/// A spoke that makes `|cos| <` this with the normal of its boundary triangle at `t = 0` lies
-/// within about 11.5° of the triangle's plane (a sliver triangle, or one edge-on to its
-/// spokes): which side it is on is not judged there.
-pub const EDGE_ON: f64 = 0.2;
-
-/// A prism whose volume at `t = 0` is below this fraction of `A·h` (its boundary triangle's
+/// A prism whose volume at `t = 0` is below this fraction of `A·h̄` (its boundary triangle's
 /// area times its mean spoke length: the volume of the right prism on that triangle) is a
 /// sliver: the sign of its volume is not judged.
 pub const SLIVER: f64 = 0.2;
 
-/// The orientation of a prism `[b₀, b₁, b₂, m₀, m₁, m₂]` with spokes `s_i = b_i − m_i`: its
-/// signed volume (mm³) and the side of its boundary triangle each spoke is on, `n_B · s_i`
-/// with `n_B = (b₁ − b₀) × (b₂ − b₀)` (mm³); or their signs.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Facing {
-    volume: f64,
-    spokes: [f64; 3],
-}
-
-impl Facing {
-    fn of(q: &[Vec3], c: &[usize; 6]) -> Self {
-        let n = normal(q, [c[0], c[1], c[2]]);
-        Self {
-            volume: prism_volume(q, c),
-            spokes: [0, 1, 2].map(|i| n.dot(&(q[c[i]] - q[c[i + 3]]))),
-        }
-    }
-
-    /// The signs of [`Facing::of`] at `t = 0`; 0 for what is not judged: the volume of a
-    /// [`SLIVER`], a spoke within [`EDGE_ON`] of its boundary triangle's plane.
-    fn start(q: &[Vec3], c: &[usize; 6]) -> Self {
-        let n = normal(q, [c[0], c[1], c[2]]);
-        let spokes = [0, 1, 2].map(|i| q[c[i]] - q[c[i + 3]]);
-        let mean_spoke = spokes.iter().map(|s| s.norm()).sum::<f64>() / 3.0;
-        let volume = prism_volume(q, c);
-        let judged = |v: f64, scale: f64| {
-            if v.abs() >= scale && v != 0.0 {
-                v.signum()
-            } else {
-                0.0
-            }
-        };
-        Self {
-            volume: judged(volume, SLIVER * 0.5 * n.norm() * mean_spoke),
-            spokes: spokes.map(|s| judged(n.dot(&s), EDGE_ON * n.norm() * s.norm())),
-        }
-    }
-
-    /// The volume or a spoke's side has the other sign than `start` says.
-    fn turned_against(self, start: &Facing) -> bool {
-        self.volume * start.volume < 0.0
-            || self
-                .spokes
-                .iter()
-                .zip(start.spokes)
-                .any(|(a, b)| a * b < 0.0)
+/// The sign of the volume of the prism `c` at `t = 0`, or 0 for a [`SLIVER`] (not judged).
+fn judged_sign(q: &[Vec3], c: &[usize; 6]) -> f64 {
+    let area = 0.5 * normal(q, [c[0], c[1], c[2]]).norm();
+    let mean_spoke = (0..3).map(|i| (q[c[i]] - q[c[i + 3]]).norm()).sum::<f64>() / 3.0;
+    let volume = prism_volume(q, c);
+    if volume.abs() >= SLIVER * area * mean_spoke && volume != 0.0 {
+        volume.signum()
+    } else {
+        0.0
     }
 }
 
@@ -347,11 +301,10 @@ mod tests {
         );
     }
 
-    /// A sliver prism: a medial triangle 0.05 wide under spokes 2 long, whose top boundary
-    /// triangle stands nearly edge-on to its spokes. Its tip swinging 0.1 across (a smooth map
-    /// need not be affine over the spokes' length) flips the prism's volume and its top's
-    /// facing but folds nothing; a spoke pushed through the sheet is caught by the well-shaped
-    /// neighbour.
+    /// A sliver prism: a medial triangle 0.05 wide under spokes 2 long, its top boundary
+    /// triangle nearly edge-on to them. Its tip swinging 0.1 across (a smooth map need not be
+    /// affine over the spokes' length) flips the prism's volume but folds nothing; the
+    /// well-shaped neighbour pushed through the sheet is caught.
     #[test]
     fn a_sliver_is_not_judged_by_its_volume_and_a_real_fold_still_is() {
         let medial = vec![
@@ -383,33 +336,23 @@ mod tests {
         let Cells::Prisms(prisms) = &guard.cells else {
             panic!("a medial template has prisms");
         };
-        let (sliver, neighbour) = (prisms[0].1, prisms[1].1);
-        assert_eq!(
-            (sliver.volume, sliver.spokes),
-            (0.0, [0.0; 3]),
-            "not judged"
-        );
-        assert_eq!((neighbour.volume, neighbour.spokes), (-1.0, [1.0; 3]));
-        // The sliver's tip swung across: its volume and its top's facing flip, nothing folds.
+        assert_eq!(prisms[0].1, 0.0, "the sliver is not judged");
+        assert_eq!(prisms[1].1, -1.0, "the neighbour is");
+        // The sliver's tip swung across: its volume flips, nothing folds.
         let mut q = template.landmarks().to_vec();
         q[2].y = -0.05;
-        let (before, swung) = (
-            Facing::of(template.landmarks(), &prisms[0].0),
-            Facing::of(&q, &prisms[0].0),
-        );
-        assert!(before.volume * swung.volume < 0.0);
-        assert!(swung
-            .spokes
-            .iter()
-            .zip(before.spokes)
-            .all(|(a, b)| a * b < 0.0));
+        let volume = |q: &[Vec3]| prism_volume(q, &prisms[0].0);
+        assert!(volume(template.landmarks()) * volume(&q) < 0.0);
         assert_eq!(guard.check_fold(&q), Ok(()));
-        // Atom 0's top spoke pushed through the sheet.
-        q[0].z = -0.5;
-        assert!(matches!(
-            guard.check_fold(&q),
-            Err(Unsound::FoldedPrisms { atom: 0, .. })
-        ));
+        // The neighbour's top pushed through the sheet: it folds.
+        for b in [0, 1, 3] {
+            q[b].z = -1.0;
+        }
+        let verdict = guard.check_fold(&q);
+        assert!(
+            matches!(verdict, Err(Unsound::FoldedPrisms { atom: 0, .. })),
+            "{verdict:?}"
+        );
     }
 
     #[test]

@@ -6,7 +6,8 @@
 //! - the schedules of synthetic cases' configs ([`FitPlan::paper_schedule`],
 //!   [`FitPlan::boundary_ssd`]);
 //! - the automatic fit of a template to one target ([`automatic`]): the μ schedules, the time
-//!   steps, the image smoothing, the varifold widths and the kernel truncation.
+//!   steps, the image smoothing, the varifold widths and the kernel truncation;
+//! - the safer settings an automatic fit that ended unsound runs again with ([`safer`]).
 //!
 //! ```
 //! use medial_core::fit::{plan, Target, AttachmentSpec};
@@ -520,9 +521,96 @@ fn mean(values: impl Iterator<Item = f64>) -> f64 {
     sum / n.max(1) as f64
 }
 
+/// How many times an automatic fit that ended unsound is run again, from its start, with
+/// [`safer`] settings before it is reported unsound.
+pub const RETRIES: usize = 2;
+
+/// The kernel width of the second retry against the plan's.
+pub const RETRY_SIGMA_FACTOR: f64 = 1.5;
+
+/// Settings to run an automatic fit again with after it ended unsound ([`safer`]), and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Safer {
+    /// The fit to run instead.
+    pub spec: FitSpec,
+    /// What changed and why, one line.
+    pub why: String,
+}
+
+/// The `retry`-th (from 1, at most [`RETRIES`]) safer version of the automatic fit `spec` of a
+/// model with landmarks `landmarks`, after it ended unsound:
+///
+/// 1. twice the time steps, and no coarse steps: a fold early in a fit is most often one step
+///    of the flow moving points too far for its time discretisation (`dt·|∇v|` large), which
+///    halving `dt` undoes;
+/// 2. then also the kernel [`RETRY_SIGMA_FACTOR`] times wider (its truncation chosen again): a
+///    smoother flow cannot fold a prism much smaller than its kernel.
+///
+/// `None` past the last retry. Each retry costs a fit; the first that ends sound is the result.
+pub fn safer(spec: &FitSpec, landmarks: &[Vec3], retry: usize) -> Option<Safer> {
+    let mut safer = spec.clone();
+    let steps = |safer: &mut FitSpec| {
+        safer.flow.time_steps *= 2;
+        for stage in &mut safer.stages {
+            stage.schedule.coarse = None;
+        }
+    };
+    let why = match retry {
+        1 => {
+            steps(&mut safer);
+            format!(
+                "again with {} time steps throughout (was {}): a fold early in a fit is most \
+                 often a step too bold for the time discretisation",
+                safer.flow.time_steps, spec.flow.time_steps
+            )
+        }
+        2 => {
+            steps(&mut safer);
+            safer.flow.sigma = round_to_hundredths(RETRY_SIGMA_FACTOR * spec.flow.sigma);
+            safer.flow.kernel_tolerance = kernel_tolerance(safer.flow.sigma, landmarks);
+            format!(
+                "again with {} time steps and σ = {} mm (was {} mm): a smoother flow cannot fold \
+                 a prism much smaller than its kernel",
+                safer.flow.time_steps, safer.flow.sigma, spec.flow.sigma
+            )
+        }
+        _ => return None,
+    };
+    Some(Safer { spec: safer, why })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_retry_doubles_the_steps_then_widens_the_kernel_then_gives_up() {
+        let mut spec = FitSpec {
+            flow: FlowSettings {
+                sigma: 1.0,
+                time_steps: 10,
+                ..FlowSettings::default()
+            },
+            stages: Vec::new(),
+        };
+        let mut stage = StageSpec::new("dice", AttachmentSpec::Ssd);
+        stage.schedule.coarse = Some(CoarseTime {
+            time_steps: 5,
+            al_iterations: 3,
+        });
+        spec.stages.push(stage);
+        let landmarks = line(100);
+        let first = safer(&spec, &landmarks, 1).unwrap().spec;
+        assert_eq!((first.flow.time_steps, first.flow.sigma), (20, 1.0));
+        assert!(first.stages[0].schedule.coarse.is_none());
+        let second = safer(&spec, &landmarks, 2).unwrap().spec;
+        assert_eq!((second.flow.time_steps, second.flow.sigma), (20, 1.5));
+        assert_eq!(
+            second.flow.kernel_tolerance,
+            kernel_tolerance(1.5, &landmarks)
+        );
+        assert!(safer(&spec, &landmarks, RETRIES + 1).is_none());
+    }
 
     fn line(n: usize) -> Vec<Vec3> {
         (0..n).map(|i| Vec3::new(i as f64, 0.0, 0.0)).collect()
