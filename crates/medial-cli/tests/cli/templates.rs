@@ -524,3 +524,93 @@ fn toy_demo_reaches_the_papers_figures() {
     assert!(f(&figures["max_spoke_normal_deg"]) <= 1.1);
     assert!(f(&figures["max_spoke_mismatch_pct"]) <= 2.2);
 }
+
+#[test]
+fn synth_stress_options_thicken_the_wall_and_degrade_the_segmentation() {
+    let dir = tempfile::tempdir().unwrap();
+    let template = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../examples/toy/template.vtk"
+    );
+    let case = |name: &str, options: &[&str]| {
+        let out = dir.path().join(name);
+        let mut args = vec!["synth", "--from", template, "--out", s(&out)];
+        args.extend(options);
+        (run_json(&args), out)
+    };
+    let volume_of = |out: &Path| {
+        medial_io::nifti_volume::read_nifti(&out.join("target.nii.gz"))
+            .unwrap()
+            .integral()
+    };
+    let (_, plain) = case("plain", &["--rotate", "0", "--shift", "0"]);
+    // A wall 1.3 times as thick: about 1.3 times the volume (the ends and the seam add a
+    // little more; rasterization ±1 %), the medial sheet and so the extent unchanged.
+    let (thick, thick_out) = case(
+        "thick",
+        &["--rotate", "0", "--shift", "0", "--thicken", "1.3"],
+    );
+    let ratio = volume_of(&thick_out) / volume_of(&plain);
+    assert!(ratio > 1.27 && ratio < 1.45, "volume ratio {ratio}");
+    assert_eq!(f(&thick["stress"]["thicken"]), 1.3);
+    let factors = |out: &Path| -> Vec<f64> {
+        std::fs::read_to_string(out.join("thickening.csv"))
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+            .collect()
+    };
+    assert!(factors(&thick_out).iter().all(|&x| x == 1.3));
+    // A regional bump: factor 2 at its atom, 1 beyond its radius, atoms in it counted.
+    let (region, region_out) = case(
+        "region",
+        &[
+            "--thicken-region",
+            "2",
+            "--region-atom",
+            "5",
+            "--region-radius",
+            "6",
+        ],
+    );
+    let k = factors(&region_out);
+    assert_eq!(k[5], 2.0);
+    let inside = k.iter().filter(|&&x| x > 1.0).count();
+    assert!(inside > 1 && inside < k.len(), "{inside} of {}", k.len());
+    assert_eq!(
+        region["stress"]["region_atoms"].as_u64(),
+        Some(inside as u64)
+    );
+    assert!(plain.join("thickening.csv").metadata().is_err());
+    // Noise and holes: seeded (the same seed, the same bytes; another seed, others), about
+    // the fraction asked of the boundary voxels flipped.
+    let noisy = ["--flip", "0.2", "--holes", "4", "--seed"];
+    let (a, a_out) = case("a", &[&noisy[..], &["3"]].concat());
+    let (_, b_out) = case("b", &[&noisy[..], &["3"]].concat());
+    let (_, c_out) = case("c", &[&noisy[..], &["4"]].concat());
+    let bytes = |out: &Path| std::fs::read(out.join("target.nii.gz")).unwrap();
+    assert_eq!(bytes(&a_out), bytes(&b_out));
+    assert_ne!(bytes(&a_out), bytes(&c_out));
+    let share = f(&a["stress"]["flipped_voxels"]) / f(&a["stress"]["boundary_voxels"]);
+    assert!((share - 0.2).abs() < 0.03, "{share}");
+    assert!(f(&a["stress"]["hole_voxels"]) > 0.0);
+    // Bad values are one-line errors naming the option.
+    let bad = dir.path().join("bad");
+    let out = s(&bad);
+    for (options, needle) in [
+        (&["--thicken", "0"][..], "--thicken"),
+        (&["--flip", "1.5"][..], "--flip"),
+        // Past the focal distance of the toy's curled sheets: a wall that crosses itself.
+        (&["--thicken", "2.3"][..], "intersects itself"),
+        (
+            &["--thicken-region", "2", "--region-atom", "100000"][..],
+            "--region-atom 100000",
+        ),
+    ] {
+        let mut args = vec!["synth", "--from", template, "--out", out];
+        args.extend(options);
+        let o = run_fails(&args, &[needle]);
+        assert_eq!(o.status.code(), Some(1), "{options:?}: {}", text(&o.stderr));
+    }
+}

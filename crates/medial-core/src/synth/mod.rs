@@ -23,10 +23,15 @@
 //! frame of the twist and bend (long axis z, thickness direction x), [`Warp::bending`] the warp,
 //! and [`target_boundary`], [`target_surface`] and [`target_image`] the targets.
 //! [`parameter_grid`] triangulates the parameter rectangle of a new analytic sheet.
+//!
+//! [`stress`] varies a case as real data would: a [`Thickening`] of the wall (global, or a
+//! regional bump of known place and size) before the warp, and a [`degrade`]d segmentation
+//! (boundary voxels flipped, small holes) after it.
 
 mod case;
 mod shape;
 mod sheets;
+pub mod stress;
 mod warp;
 
 pub use case::{
@@ -38,4 +43,5 @@ pub use shape::{
     CUP_RADIUS_SEPTUM, CUP_RINGS, TOY_CELLS, TOY_CURL, TOY_LENGTH, TOY_RADIUS, TOY_WIDTH,
 };
 pub use sheets::{parameter_grid, ParameterGrid};
+pub use stress::{degrade, seeded_directions, Degradation, Degraded, Region, Thickening};
 pub use warp::Warp;

@@ -12,11 +12,16 @@
 use super::{boundary_config, paper_config, BOUNDARY_SSD_NOTE, PAPER_SCHEDULE_NOTE};
 use super::{target_image, CaseFiles, SynthArgs};
 use crate::error::CliError;
-use crate::output::{model_error, print_json, TemplateSummary};
+use crate::output::{model_error, print_json, write_text, TemplateSummary};
 use medial_core::fit::plan::Geometry;
+use medial_core::image::volume::Volume;
 use medial_core::mesh::topology::signed_volume;
 use medial_core::mesh::PrincipalAxes;
-use medial_core::synth::{target_boundary, target_surface, Warp};
+use medial_core::model::template::MedialTemplate;
+use medial_core::synth::{
+    degrade, seeded_directions, target_boundary, target_surface, Degradation, Degraded, Region,
+    Thickening, Warp,
+};
 use medial_core::Vec3;
 use nalgebra::{Matrix4, Rotation3, Unit};
 use serde::Serialize;
@@ -64,6 +69,46 @@ pub struct WarpArgs {
     /// template's centre, then a shift by 1 mm along (1, 1, 1)/√3].
     #[arg(long, value_name = "FILE", requires = "from")]
     pub affine: Option<PathBuf>,
+    /// With --from: rotation of the default affine part, degrees (about (1, 1, 1)/√3, or an
+    /// axis drawn from --seed) [default: 5].
+    #[arg(long, value_name = "DEG", requires = "from", conflicts_with = "affine")]
+    pub rotate: Option<f64>,
+    /// With --from: shift of the default affine part, mm (along (1, 1, 1)/√3, or a direction
+    /// drawn from --seed) [default: 1].
+    #[arg(long, value_name = "MM", requires = "from", conflicts_with = "affine")]
+    pub shift: Option<f64>,
+    /// With --from: every spoke of the template scaled by this factor about its medial point
+    /// before the warp (a thicker or thinner wall, not a larger shape) [default: 1].
+    #[arg(long, value_name = "FACTOR", requires = "from")]
+    pub thicken: Option<f64>,
+    /// With --from: the spokes scaled by this factor at --region-atom, by 1 from
+    /// --region-radius on, by a raised cosine between (on top of --thicken); the factor of
+    /// every atom goes to thickening.csv.
+    #[arg(long, value_name = "FACTOR", requires = "from")]
+    pub thicken_region: Option<f64>,
+    /// With --thicken-region: the atom at the centre of the region [default: the atom nearest
+    /// the centroid of the medial points].
+    #[arg(long, value_name = "N", requires = "thicken_region")]
+    pub region_atom: Option<usize>,
+    /// With --thicken-region: the region's radius, mm (Euclidean, from the centre atom's
+    /// medial point) [default: a quarter of the template's longest extent].
+    #[arg(long, value_name = "MM", requires = "thicken_region")]
+    pub region_radius: Option<f64>,
+    /// With --from: probability with which each boundary voxel of the target segmentation
+    /// changes label (segmentation noise), 0 to 1 [default: 0].
+    #[arg(long, value_name = "FRACTION", requires = "from")]
+    pub flip: Option<f64>,
+    /// With --from: small holes cut out of the target segmentation (balls of --hole-radius
+    /// centred on foreground voxels drawn at random) [default: 0].
+    #[arg(long, value_name = "N", requires = "from")]
+    pub holes: Option<usize>,
+    /// With --holes: the holes' radius, mm [default: the voxel size].
+    #[arg(long, value_name = "MM", requires = "holes")]
+    pub hole_radius: Option<f64>,
+    /// With --from: seed of the random draws (the voxels flipped, the holes' places, and the
+    /// axis of --rotate and direction of --shift, which are (1, 1, 1)/√3 without a seed).
+    #[arg(long, value_name = "S", requires = "from")]
+    pub seed: Option<u64>,
 }
 
 /// The options of one case from a template, defaults applied.
@@ -73,8 +118,11 @@ struct Options<'a> {
     bend: f64,
     twist: f64,
     affine: Option<&'a Path>,
+    rotate: f64,
+    shift: f64,
     spacing: f64,
     margin: f64,
+    stress: &'a WarpArgs,
 }
 
 impl<'a> Options<'a> {
@@ -85,8 +133,11 @@ impl<'a> Options<'a> {
             bend: args.warp.bend.unwrap_or(DEFAULT_BEND_DEG),
             twist: args.warp.twist.unwrap_or(DEFAULT_TWIST_DEG),
             affine: args.warp.affine.as_deref(),
+            rotate: args.warp.rotate.unwrap_or(DEFAULT_ROTATION_DEG),
+            shift: args.warp.shift.unwrap_or(DEFAULT_SHIFT_MM),
             spacing: args.spacing.unwrap_or(DEFAULT_SPACING_MM),
             margin: args.margin,
+            stress: &args.warp,
         }
     }
 }
@@ -98,6 +149,9 @@ struct WarpSummary {
     out: PathBuf,
     template: TemplateSummary,
     warp: WarpFigures,
+    /// The thickening and the degradation of the target, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    stress: Option<StressFigures>,
     /// `|φ(p) − p|` over the template's boundary points, mm.
     displacement_mean_mm: f64,
     displacement_max_mm: f64,
@@ -113,6 +167,56 @@ struct WarpSummary {
     /// `det A` times the template's volume (bend and twist keep volume to first order), mm³.
     affine_volume_mm3: f64,
     fit: Geometry,
+}
+
+/// What `--thicken`, `--thicken-region`, `--flip` and `--holes` did, as printed.
+#[derive(Serialize)]
+struct StressFigures {
+    thicken: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    region_centre_mm: Option<[f64; 3]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    region_radius_mm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    region_factor: Option<f64>,
+    /// Atoms within the region (factor changed by the bump).
+    region_atoms: usize,
+    boundary_voxels: usize,
+    flipped_voxels: usize,
+    hole_voxels: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    seed: Option<u64>,
+}
+
+impl StressFigures {
+    fn of(
+        args: &Options<'_>,
+        thickening: Option<&Thickening>,
+        template: &MedialTemplate,
+        degraded: Option<Degraded>,
+    ) -> Option<Self> {
+        if thickening.is_none() && degraded.is_none() {
+            return None;
+        }
+        let region = thickening.and_then(|t| t.region());
+        Some(Self {
+            thicken: thickening.map_or(1.0, |t| t.global()),
+            region_centre_mm: region.map(|r| r.centre.into()),
+            region_radius_mm: region.map(|r| r.radius_mm),
+            region_factor: region.map(|r| r.factor),
+            region_atoms: region.map_or(0, |r| {
+                template
+                    .medial_points()
+                    .iter()
+                    .filter(|m| (*m - r.centre).norm() < r.radius_mm)
+                    .count()
+            }),
+            boundary_voxels: degraded.as_ref().map_or(0, |d| d.boundary_voxels),
+            flipped_voxels: degraded.as_ref().map_or(0, |d| d.flipped),
+            hole_voxels: degraded.as_ref().map_or(0, |d| d.cleared),
+            seed: args.stress.seed,
+        })
+    }
 }
 
 /// The warp as printed.
@@ -148,9 +252,17 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
     let boundary = template.boundary_mesh().map_err(in_template)?;
     let axes = PrincipalAxes::of(boundary.points()).map_err(in_template)?;
     let warp = build_warp(args, &axes)?;
-    let target = target_boundary(&boundary, &warp).map_err(in_template)?;
-    let surface = target_surface(&boundary, &warp).map_err(in_template)?;
+    let thickening = thickening(args, &template, &axes)?;
+    let walled = match &thickening {
+        Some(t) => t
+            .boundary(&template)
+            .map_err(|e| CliError::Input(format!("--thicken / --thicken-region: {e}")))?,
+        None => boundary.clone(),
+    };
+    let target = target_boundary(&walled, &warp).map_err(in_template)?;
+    let surface = target_surface(&walled, &warp).map_err(in_template)?;
     let image = target_image(&surface, args.spacing, args.margin)?;
+    let (image, degradation) = degraded(args, image)?;
     let geometry = Geometry::of(&template, &boundary, &axes);
     let plan = geometry.plan();
     let header = header(args, &warp, &geometry);
@@ -171,6 +283,9 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
         ],
     }
     .write(args.out)?;
+    if let Some(t) = &thickening {
+        write_factors(&args.out.join("thickening.csv"), &t.atom_factors(&template))?;
+    }
     let affine = nalgebra::Affine3::from_matrix_unchecked(warp.affine());
     let moved = |p: &Vec3| affine.transform_point(&(*p).into()).coords;
     let (displacement_mean_mm, displacement_max_mm) = mean_max(
@@ -181,7 +296,7 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
             .map(|(p, q)| (q - p).norm()),
     );
     let (beyond_affine_mean_mm, beyond_affine_max_mm) = mean_max(
-        boundary
+        walled
             .points()
             .iter()
             .zip(target.points())
@@ -191,7 +306,8 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
     print_json(&WarpSummary {
         template_file: args.template.into(),
         out: args.out.into(),
-        warp: figures(args, &warp, &axes, boundary.points()),
+        warp: figures(args, &warp, &axes, walled.points()),
+        stress: StressFigures::of(args, thickening.as_ref(), &template, degradation),
         displacement_mean_mm,
         displacement_max_mm,
         beyond_affine_mean_mm,
@@ -206,6 +322,78 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
     })
 }
 
+/// The thickening of the options, if any: `--thicken` everywhere and `--thicken-region`
+/// about `--region-atom` (default: the atom nearest the medial points' centroid) within
+/// `--region-radius` (default: a quarter of the longest extent).
+fn thickening(
+    args: &Options<'_>,
+    template: &MedialTemplate,
+    axes: &PrincipalAxes,
+) -> Result<Option<Thickening>, CliError> {
+    let stress = args.stress;
+    if stress.thicken.is_none() && stress.thicken_region.is_none() {
+        return Ok(None);
+    }
+    let medial = template.medial_points();
+    let region = match stress.thicken_region {
+        None => None,
+        Some(factor) => {
+            let atom = match stress.region_atom {
+                Some(atom) if atom < medial.len() => atom,
+                Some(atom) => {
+                    return Err(CliError::Input(format!(
+                        "--region-atom {atom}: the template has {} atoms (0 to {})",
+                        medial.len(),
+                        medial.len() - 1
+                    )))
+                }
+                None => nearest(medial, &(medial.iter().sum::<Vec3>() / medial.len() as f64)),
+            };
+            Some(Region {
+                centre: medial[atom],
+                radius_mm: stress.region_radius.unwrap_or(axes.extent.max() / 4.0),
+                factor,
+            })
+        }
+    };
+    Thickening::new(stress.thicken.unwrap_or(1.0), region)
+        .map(Some)
+        .map_err(|e| CliError::Input(format!("--thicken / --thicken-region: {e}")))
+}
+
+/// The index of the point of `points` nearest `p` (the first of equals).
+fn nearest(points: &[Vec3], p: &Vec3) -> usize {
+    (0..points.len())
+        .min_by(|&a, &b| (points[a] - p).norm().total_cmp(&(points[b] - p).norm()))
+        .unwrap_or(0)
+}
+
+/// `image` degraded as `--flip`, `--holes` and `--hole-radius` say (unchanged without them).
+fn degraded(args: &Options<'_>, image: Volume) -> Result<(Volume, Option<Degraded>), CliError> {
+    let stress = args.stress;
+    if stress.flip.is_none() && stress.holes.is_none() {
+        return Ok((image, None));
+    }
+    let how = Degradation {
+        flip_fraction: stress.flip.unwrap_or(0.0),
+        holes: stress.holes.unwrap_or(0),
+        hole_radius_mm: stress.hole_radius.unwrap_or(args.spacing),
+        seed: stress.seed.unwrap_or(0),
+    };
+    let out =
+        degrade(&image, &how).map_err(|e| CliError::Input(format!("--flip / --holes: {e}")))?;
+    Ok((out.image.clone(), Some(out)))
+}
+
+/// Writes `atom,factor` rows: the spoke factor of every atom (the truth of a thickening).
+fn write_factors(path: &Path, factors: &[f64]) -> Result<(), CliError> {
+    let mut text = String::from("atom,factor\n");
+    for (atom, f) in factors.iter().enumerate() {
+        text.push_str(&format!("{atom},{f}\n"));
+    }
+    write_text(path, &text)
+}
+
 /// The warp of the options: twist and bend along `axes`, then the affine part of `--affine`
 /// or the default similarity about the centre.
 fn build_warp(args: &Options<'_>, axes: &PrincipalAxes) -> Result<Warp, CliError> {
@@ -217,21 +405,34 @@ fn build_warp(args: &Options<'_>, axes: &PrincipalAxes) -> Result<Warp, CliError
             let affine = medial_io::affine::read_affine(path)?.into_inner();
             bent.with_affine(&affine).map_err(|e| model_error(path, e))
         }
-        None => Ok(bent.with_affine(&default_affine(axes.centre))?),
+        None => Ok(bent.with_affine(&default_affine(args, axes.centre))?),
     }
 }
 
-/// The default affine part: `p ↦ s R (p − c) + c + d·u` with `R` the rotation by
-/// [`DEFAULT_ROTATION_DEG`] about `u = (1, 1, 1)/√3`, `s` = [`DEFAULT_SCALE`], `d` =
-/// [`DEFAULT_SHIFT_MM`].
-fn default_affine(centre: Vec3) -> Matrix4<f64> {
-    let axis = Unit::new_normalize(Vec3::new(1.0, 1.0, 1.0));
-    let linear = Rotation3::from_axis_angle(&axis, DEFAULT_ROTATION_DEG.to_radians()).matrix()
-        * DEFAULT_SCALE;
+/// The default affine part: `p ↦ s R (p − c) + c + d·v` with `R` the rotation by `--rotate`
+/// ([`DEFAULT_ROTATION_DEG`]) about `u`, `s` = [`DEFAULT_SCALE`], `d` = `--shift`
+/// ([`DEFAULT_SHIFT_MM`]); `u = v = (1, 1, 1)/√3`, or drawn from `--seed`.
+fn default_affine(args: &Options<'_>, centre: Vec3) -> Matrix4<f64> {
+    let [axis, direction] = directions(args);
+    let axis = Unit::new_normalize(axis);
+    let linear =
+        Rotation3::from_axis_angle(&axis, args.rotate.to_radians()).matrix() * DEFAULT_SCALE;
     let mut m = linear.to_homogeneous();
-    let offset = centre + axis.into_inner() * DEFAULT_SHIFT_MM - linear * centre;
+    let offset = centre + direction * args.shift - linear * centre;
     m.fixed_view_mut::<3, 1>(0, 3).copy_from(&offset);
     m
+}
+
+/// The axis of the default rotation and the direction of its shift: `(1, 1, 1)/√3` both, or
+/// drawn from `--seed`.
+fn directions(args: &Options<'_>) -> [Vec3; 2] {
+    match args.stress.seed {
+        Some(seed) => {
+            let d = seeded_directions(seed, 2);
+            [d[0], d[1]]
+        }
+        None => [Vec3::new(1.0, 1.0, 1.0).normalize(); 2],
+    }
 }
 
 /// The comment lines at the top of the configs: where the case comes from, the warp, the
@@ -240,10 +441,14 @@ fn header(args: &Options<'_>, warp: &Warp, g: &Geometry) -> String {
     let name = file_name(args.template);
     let affine = match args.affine {
         Some(path) => format!("the affine map of {}", file_name(path)),
-        None => format!(
-            "the default affine map: rotation {DEFAULT_ROTATION_DEG}° about (1,1,1)/√3 and\n# \
-             scaling {DEFAULT_SCALE} about c, shift {DEFAULT_SHIFT_MM} mm along (1,1,1)/√3"
-        ),
+        None => {
+            let [u, v] = directions(args);
+            format!(
+                "the default affine map: rotation {}° about ({:.3}, {:.3}, {:.3}) and\n# \
+                 scaling {DEFAULT_SCALE} about c, shift {} mm along ({:.3}, {:.3}, {:.3})",
+                args.rotate, u.x, u.y, u.z, args.shift, v.x, v.y, v.z
+            )
+        }
     };
     format!(
         "# Synthetic case made from the template {name} by `medial synth --from`
