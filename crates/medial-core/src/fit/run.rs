@@ -205,13 +205,14 @@ impl AutomaticStart {
 }
 
 /// The automatic fit of `model` to `target`: the plan chosen from the data
-/// ([`plan::automatic`], from the model the flow starts from: aligned, and thickened where the
-/// wall is thicker, since the kernel width follows the spokes the flow has to move) and the
-/// initial alignment
+/// ([`plan::automatic`], from the model as given: the kernel width is a property of the
+/// template's own geometry, not of the alignment's guess at the target's thickness; decision
+/// 0032) and the initial alignment
 /// ([`initial_alignment`]; a medial template carried by [`align_template`], a plain mesh by the
 /// whole map), its grids within `memory`. Voxels for rasterizing a closed surface to align to: half the mean spoke
 /// ([`Geometry::alignment_spacing`]), or a 128th of a plain mesh's long extent.
 pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<AutomaticStart> {
+    let spec = plan::automatic(model, target)?;
     let (alignment, start): (InitialAlignment, Model) = match model {
         Model::Medial(template) => {
             let boundary = template.boundary_mesh()?;
@@ -238,7 +239,6 @@ pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<
             (alignment, Model::Plain(carried))
         }
     };
-    let spec = plan::automatic(&start, target)?;
     Ok(AutomaticStart {
         spec,
         model: start,
