@@ -14,7 +14,10 @@
 //!   similarity, `V_img / (s³ V_tmpl)`, is reported ([`Alignment::thickness_ratio`]),
 //! - `R` is the identity, or `E_img D E_tmplᵀ` for the proper eigenvector frames `E` of the two
 //!   covariances (eigenvalues in increasing order) and each of the four sign matrices
-//!   `D = diag(±1, ±1, ±1)` with `det D = 1` (the principal axes fix `R` up to these signs),
+//!   `D = diag(±1, ±1, ±1)` with `det D = 1` (the principal axes fix `R` up to these signs);
+//!   where two variances of either shape are within [`FREE_PLANE`] of each other the axes in
+//!   their plane are not fixed, and each of these is also tried after turning the template
+//!   about its third axis in steps of [`TURN_STEP_DEG`],
 //! - `t = c_img − s R c_tmpl`,
 //!
 //! and the candidate whose moved boundary overlaps the foreground best (voxel Dice on the
@@ -88,6 +91,36 @@ impl Moments {
     }
 }
 
+/// Two principal variances closer than this fraction of the larger leave the principal axes
+/// in their plane undetermined: a shape with a rotational or threefold symmetry about an axis
+/// (a cup, the toy's three sheets at 120°) has equal ones, and sampling on voxels moves them by
+/// a few per cent, so the eigenvectors there point anywhere in the plane.
+pub const FREE_PLANE: f64 = 0.1;
+
+/// Step of the turns about the third axis tried where the principal plane is free
+/// ([`FREE_PLANE`]), degrees: a wrong turn of half a step leaves a sheet of width `w` at
+/// most `w·sin 7.5° ≈ 0.13 w` off, which the overlap still tells from a right one.
+pub const TURN_STEP_DEG: f64 = 15.0;
+
+/// The index (in the frame's increasing order) of the distinct principal axis where the other
+/// two variances are within [`FREE_PLANE`] of each other; none where all three differ.
+fn free_plane(m: &Moments) -> Option<usize> {
+    let mut v: Vec<f64> = SymmetricEigen::new(m.covariance)
+        .eigenvalues
+        .iter()
+        .copied()
+        .collect();
+    v.sort_by(f64::total_cmp);
+    let close = |a: f64, b: f64| b > 0.0 && (b - a) / b < FREE_PLANE;
+    if close(v[0], v[1]) {
+        Some(2)
+    } else if close(v[1], v[2]) {
+        Some(0)
+    } else {
+        None
+    }
+}
+
 /// The chosen similarity and how much it helps.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Alignment {
@@ -158,11 +191,32 @@ pub fn align_similarity(boundary: &TriMesh, mask: &Volume) -> Result<Alignment> 
         [-1.0, 1.0, -1.0],
         [-1.0, -1.0, 1.0],
     ];
-    let rotations = std::iter::once(Matrix3::identity()).chain(
-        signs
-            .iter()
-            .map(|d| e_img * Matrix3::from_diagonal(&Vec3::from(*d)) * e_tmpl.transpose()),
-    );
+    let by_axes: Vec<Matrix3<f64>> = signs
+        .iter()
+        .map(|d| e_img * Matrix3::from_diagonal(&Vec3::from(*d)) * e_tmpl.transpose())
+        .collect();
+    // Where two principal variances (of either shape) are nearly equal, the axes in their
+    // plane are not fixed by the moments: turn the template about its third axis too.
+    let turns: Vec<Matrix3<f64>> = match free_plane(&image).or(free_plane(&template)) {
+        None => Vec::new(),
+        Some(axis) => {
+            let axis = nalgebra::Unit::new_normalize(e_tmpl.column(axis).into_owned());
+            let steps = (360.0 / TURN_STEP_DEG).round() as usize;
+            (1..steps)
+                .map(|k| {
+                    let angle = (k as f64 * TURN_STEP_DEG).to_radians();
+                    *nalgebra::Rotation3::from_axis_angle(&axis, angle).matrix()
+                })
+                .collect()
+        }
+    };
+    let rotations = std::iter::once(Matrix3::identity())
+        .chain(by_axes.iter().copied())
+        .chain(
+            by_axes
+                .iter()
+                .flat_map(|r| turns.iter().map(move |t| r * t)),
+        );
     // No move at all is a candidate too: moments can mislead on a thin or partial shape.
     let mut best = (Matrix4::identity(), voxel_dice_before);
     for r in rotations {
@@ -397,6 +451,27 @@ mod tests {
             (moved.coords - Vec3::new(3.0, -2.0, 1.0)).norm() < 0.1,
             "{a:?}"
         );
+    }
+
+    /// The toy's three sheets at 120° have two equal principal variances: its moments fix no
+    /// axis in their plane, and only the turns about the seam find a rotated copy.
+    #[test]
+    fn a_turned_shape_with_a_free_principal_plane_is_found_by_the_turns() {
+        let case = crate::synth::SyntheticCase::build(crate::synth::Shape::Toy).unwrap();
+        let boundary = case.boundary().unwrap();
+        let r = nalgebra::Rotation3::from_axis_angle(
+            &nalgebra::Unit::new_normalize(Vec3::new(0.3, -0.5, 0.8)),
+            33f64.to_radians(),
+        );
+        let shift = Vec3::new(4.0, -3.0, 2.0);
+        let moved: Vec<Vec3> = boundary.points().iter().map(|p| r * p + shift).collect();
+        let target = TriMesh::new(moved, boundary.triangles().to_vec()).unwrap();
+        let (dims, grid) = grid_around(&target, 0.5, 2.0).unwrap();
+        let mask = rasterize(&target, dims, grid).unwrap();
+        let image = Moments::of(&mask).unwrap();
+        assert!(free_plane(&image).is_some(), "{:?}", image.covariance);
+        let a = align_similarity(&boundary, &mask).unwrap();
+        assert!(a.voxel_dice > 0.85, "{a:?}");
     }
 
     #[test]
