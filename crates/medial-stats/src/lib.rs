@@ -40,7 +40,7 @@ pub mod shape;
 pub use analysis::{ClusterInference, ContrastResult, Options, PermutationSummary, Study};
 pub use atoms::{atom_values, Alignment, AtomMeasure, SheetNormals};
 pub use contrast::Contrast;
-pub use design::{Candidate, Design, TableOptions};
+pub use design::{Candidate, Design, Matched, TableOptions};
 pub use error::{Result, StatsError};
 pub use fdr::q_values;
 pub use glm::{Glm, GlmOptions, Observations, Tail};

@@ -16,6 +16,7 @@ mod inflate;
 mod reliability;
 mod resume;
 mod stats;
+mod stats_cohort;
 mod template;
 mod templates;
 mod transform;

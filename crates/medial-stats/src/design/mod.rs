@@ -208,17 +208,22 @@ impl Design {
         Ok(self)
     }
 
-    /// For every design row, the index in `candidates` of its subject (matched by name). Every
-    /// row's subject must be a usable candidate; candidates the design does not name are left
-    /// out. The error names the first subject that does not match, and why.
+    /// The design's rows matched to `candidates` by subject name. A row whose subject is not a
+    /// candidate is an error (naming it); a row whose subject is unusable is left out of the
+    /// design (and listed with why); candidates the design does not name are left out. At
+    /// least one row must remain.
     ///
     /// ```
     /// use medial_stats::{design::Candidate, Design, TableOptions};
     ///
-    /// let csv = "subject,group\ns3,b\ns1,a\ns2,b\ns4,a\n";
+    /// let csv = "subject,group\ns3,b\ns1,a\ns2,b\ns4,a\ns5,a\n";
     /// let design = Design::from_csv(csv, &TableOptions::default())?;
-    /// let cohort = ["s1", "s2", "s3", "s4", "s5"].map(|name| Candidate { name, unusable: None });
-    /// assert_eq!(design.match_subjects(&cohort)?, [2, 0, 1, 3]);
+    /// let mut cohort = ["s1", "s2", "s3", "s4", "s5"].map(|name| Candidate { name, unusable: None });
+    /// cohort[3].unusable = Some("its fit failed");
+    /// let matched = design.match_subjects(&cohort)?;
+    /// assert_eq!(matched.subjects, [2, 0, 1, 4]);
+    /// assert_eq!(matched.design.subject_names().unwrap(), ["s3", "s1", "s2", "s5"]);
+    /// assert_eq!(matched.left_out, [("s4".to_string(), "its fit failed".to_string())]);
     /// let short = &cohort[..3];
     /// assert_eq!(
     ///     design.match_subjects(short).unwrap_err().to_string(),
@@ -226,7 +231,7 @@ impl Design {
     /// );
     /// # Ok::<(), medial_stats::StatsError>(())
     /// ```
-    pub fn match_subjects(&self, candidates: &[Candidate<'_>]) -> Result<Vec<usize>> {
+    pub fn match_subjects(&self, candidates: &[Candidate<'_>]) -> Result<Matched> {
         let names = self.subject_names.as_ref().ok_or_else(|| {
             StatsError::design(
                 "table",
@@ -238,33 +243,48 @@ impl Design {
             .enumerate()
             .map(|(k, c)| (c.name, k))
             .collect();
-        names
-            .iter()
-            .enumerate()
-            .map(|(row, name)| {
-                let place = || format!("subject `{name}` (row {})", row + 1);
-                match index.get(name.as_str()) {
-                    None => {
-                        const SHOWN: usize = 8;
-                        let mut listed: Vec<&str> =
-                            candidates.iter().take(SHOWN).map(|c| c.name).collect();
-                        if candidates.len() > SHOWN {
-                            listed.push("…");
-                        }
-                        Err(StatsError::design(
-                            place(),
-                            format!("is not in the cohort (its subjects: {})", listed.join(", ")),
-                        ))
-                    }
-                    Some(&k) => match candidates[k].unusable {
-                        Some(why) => Err(StatsError::design(
-                            place(),
-                            format!("has no data to test: {why}"),
-                        )),
-                        None => Ok(k),
-                    },
+        let mut subjects = Vec::new();
+        let mut left_out = Vec::new();
+        let mut keep = Vec::with_capacity(names.len());
+        for (row, name) in names.iter().enumerate() {
+            let Some(&k) = index.get(name.as_str()) else {
+                const SHOWN: usize = 8;
+                let mut listed: Vec<&str> = candidates.iter().take(SHOWN).map(|c| c.name).collect();
+                if candidates.len() > SHOWN {
+                    listed.push("…");
                 }
-            })
-            .collect()
+                return Err(StatsError::design(
+                    format!("subject `{name}` (row {})", row + 1),
+                    format!("is not in the cohort (its subjects: {})", listed.join(", ")),
+                ));
+            };
+            match candidates[k].unusable {
+                Some(why) => left_out.push((name.clone(), why.to_string())),
+                None => subjects.push(k),
+            }
+            keep.push(candidates[k].unusable.is_none());
+        }
+        if subjects.is_empty() {
+            return Err(StatsError::design(
+                "table",
+                "none of its subjects has data to test (every one's fit is unusable)",
+            ));
+        }
+        Ok(Matched {
+            design: self.select_rows(&keep)?,
+            subjects,
+            left_out,
+        })
     }
+}
+
+/// A design matched to a cohort's subjects ([`Design::match_subjects`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Matched {
+    /// The design on the rows whose subject is usable.
+    pub design: Design,
+    /// For every row of `design`, the index of its subject among the candidates.
+    pub subjects: Vec<usize>,
+    /// The rows left out: their subject and why.
+    pub left_out: Vec<(String, String)>,
 }

@@ -1,22 +1,30 @@
 //! `medial stats`: a general linear model at every point or cell of a mesh whose array holds one
-//! component per subject (meshglm's input), with permutation inference; the statistics are
+//! component per subject (meshglm's input), or at every atom of a `medial batch` cohort
+//! ([`cohort`]), with permutation inference; the statistics and the per-atom measures are
 //! [`medial_stats`]'s, this module reads the inputs, calls it and writes the results.
 
 use crate::error::CliError;
 use crate::output::{print_json, write_json, write_options, write_text};
 use medial_io::vtk::{self, ArrayKind, DataArray, PolyData, ValueType};
 use medial_stats::{
-    cluster_outlines, diffusion_time, Contrast, ContrastResult, Design, Elements, Mesh,
-    Observations, Options, Study, Support, TableOptions, Tail, TfceParameters,
+    atom_values, cluster_outlines, diffusion_time, Alignment, AtomMeasure, Contrast,
+    ContrastResult, Design, Elements, Mesh, Observations, Options, SheetNormals, Study, Support,
+    TableOptions, Tail, TfceParameters,
 };
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 
+pub mod cohort;
+
+use cohort::Cohort;
+
 /// Test a design's contrasts at every element of a mesh.
 #[derive(clap::Args, Debug)]
 pub struct StatsArgs {
-    /// A legacy VTK triangle mesh with an array of one component per subject (--array).
-    #[arg(value_name = "INPUT.vtk")]
+    /// A legacy VTK triangle mesh with an array of one component per subject (--array), or a
+    /// `medial batch` folder (DIR/cohort.csv and each subject's fit: a measure at every atom,
+    /// on the template's medial sheet; the design's `subject` column names the subjects).
+    #[arg(value_name = "INPUT")]
     pub input: PathBuf,
     /// The design: a CSV table with a header (.csv: columns by name, text columns categorical,
     /// an intercept added), or meshglm's whitespace matrix taken as it is (any other name).
@@ -29,9 +37,21 @@ pub struct StatsArgs {
     /// Output folder (created if needed).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
-    /// The array of the subjects' values.
-    #[arg(long, value_name = "NAME", default_value = "Y")]
-    pub array: String,
+    /// The array of the subjects' values [default: Y]; with a cohort folder the measure at
+    /// every atom [default: thickness]: thickness, spoke_pos, spoke_neg (the spoke on the + / −
+    /// side of the template's medial normal), spoke1, spoke2, spoke3, displacement (of the
+    /// medial point along the template's normal, mm), ball_residual, or any atoms.csv column.
+    #[arg(long, value_name = "NAME")]
+    pub array: Option<String>,
+    /// Cohort folder: the template the subjects were fitted from [default: the first
+    /// subject's template.vtk, or the template its config.toml names].
+    #[arg(long, value_name = "TEMPLATE.vtk")]
+    pub template: Option<PathBuf>,
+    /// Cohort folder, --array displacement: how each fitted model is placed on the template
+    /// first: none, rigid (rotation and translation of the medial points, least squares) or
+    /// similarity (and scale).
+    #[arg(long, value_name = "HOW", default_value = "rigid")]
+    pub align: String,
     /// The array is on the triangles (CELL_DATA), not the points.
     #[arg(long)]
     pub cell: bool,
@@ -146,6 +166,8 @@ fn read_contrast(spec: &str, design: &Design) -> Result<Contrast, CliError> {
 #[derive(Serialize)]
 struct Summary {
     input: PathBuf,
+    #[serde(flatten)]
+    source: Source,
     array: String,
     support: &'static str,
     subjects: usize,
@@ -282,10 +304,55 @@ fn slug(k: usize, name: &str) -> String {
     format!("{}_{}", k + 1, clean.trim_matches('_'))
 }
 
-/// Reads, tests every contrast, writes DIR/stats.vtk, DIR/clusters.csv, DIR/clusters_edges.vtk
-/// and DIR/summary.json (with several contrasts, each one's files in DIR/K_NAME/), prints the
-/// summary.
-pub fn run(args: &StatsArgs) -> Result<(), CliError> {
+/// What is tested: the mesh, its elements' data (one value per subject), the design whose rows
+/// are those subjects, and how the results are written.
+struct Prepared {
+    /// The mesh's points (the template's medial points for a cohort).
+    points: Vec<medial_core::Vec3>,
+    triangles: Vec<[usize; 3]>,
+    support: Support,
+    design: Design,
+    observations: Observations,
+    exclude: Option<Vec<bool>>,
+    /// A cohort's template boundary, where the results are also written.
+    boundary: Option<Boundary>,
+    /// Point arrays written beside the results (a cohort's medial normals).
+    extra: Vec<DataArray>,
+    /// What the summary says of the input.
+    source: Source,
+}
+
+/// A template's boundary and the atom of each of its points (`stats_boundary.vtk`: the
+/// results at every boundary point are its atom's).
+struct Boundary {
+    points: Vec<medial_core::Vec3>,
+    triangles: Vec<[usize; 3]>,
+    atom_of: Vec<usize>,
+}
+
+/// A subject of the cohort that the design names but whose fit is not used.
+#[derive(Serialize)]
+struct LeftOut {
+    subject: String,
+    why: String,
+}
+
+/// The input as the summary records it.
+#[derive(Serialize)]
+struct Source {
+    kind: &'static str,
+    /// A cohort's template.
+    template: Option<PathBuf>,
+    /// A cohort's subjects, in the design's order.
+    subject_names: Option<Vec<String>>,
+    /// The subjects the design names whose fits are not usable (left out of the test).
+    left_out: Option<Vec<LeftOut>>,
+    /// A cohort's displacement alignment.
+    alignment: Option<&'static str>,
+}
+
+/// The input mesh and its array (meshglm's input).
+fn prepare_mesh(args: &StatsArgs) -> Result<Prepared, CliError> {
     let data = vtk::read_polydata(&args.input)?;
     let support = if args.cell {
         Support::Cells
@@ -303,9 +370,6 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
             triangles.len()
         )));
     }
-    let points: Vec<[f64; 3]> = data.points.iter().map(|p| [p.x, p.y, p.z]).collect();
-    let mesh = Mesh::new(points.clone(), triangles.clone())
-        .map_err(|e| CliError::Input(format!("{}: {e}", args.input.display())))?;
     let arrays = if args.cell {
         &data.cell_data
     } else {
@@ -322,24 +386,20 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
             ))
         })
     };
-    let values = find(&args.array)?;
+    let array_name = args.array.as_deref().unwrap_or("Y");
+    let values = find(array_name)?;
     let design = read_design(args)?;
     if values.components != design.subjects() {
         return Err(CliError::Input(format!(
             "{}: array '{}' has {} components, the design {} subjects (rows)",
             args.input.display(),
-            args.array,
+            array_name,
             values.components,
             design.subjects()
         )));
     }
     let observations =
         Observations::new(values.components, values.values.clone()).map_err(stats_error)?;
-    let contrasts = args
-        .contrasts
-        .iter()
-        .map(|c| read_contrast(c, &design))
-        .collect::<Result<Vec<_>, _>>()?;
     let exclude = match &args.exclude {
         Some(name) => {
             let a = find(name)?;
@@ -353,6 +413,157 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
         }
         None => None,
     };
+    Ok(Prepared {
+        points: data.points.clone(),
+        triangles,
+        support,
+        design,
+        observations,
+        exclude,
+        boundary: None,
+        extra: Vec::new(),
+        source: Source {
+            kind: "mesh",
+            template: None,
+            subject_names: None,
+            left_out: None,
+            alignment: None,
+        },
+    })
+}
+
+/// A `medial batch` folder: the measure `--array` at every atom of every subject the design
+/// names, on the template's medial sheet.
+fn prepare_cohort(args: &StatsArgs) -> Result<Prepared, CliError> {
+    let refuse = |what: &str| {
+        CliError::Usage(format!(
+            "{what} applies to a mesh input, not to a cohort folder ({})",
+            args.input.display()
+        ))
+    };
+    if args.cell {
+        return Err(refuse("--cell"));
+    }
+    if args.exclude.is_some() {
+        return Err(refuse("--exclude"));
+    }
+    let cohort = Cohort::read(&args.input)?;
+    let matched = read_design(args)?
+        .match_subjects(&cohort.candidates())
+        .map_err(|e| CliError::Input(format!("{}: {e}", args.design.display())))?;
+    for (name, why) in &matched.left_out {
+        eprintln!("subject '{name}' left out: {why}");
+    }
+    let design = matched.design;
+    let names: Vec<&str> = matched
+        .subjects
+        .iter()
+        .map(|&k| cohort.subjects[k].0.as_str())
+        .collect();
+    let (template_path, template) = cohort.template(args.template.as_deref(), &names)?;
+    let normals = SheetNormals::new(&template);
+    let measure = AtomMeasure::parse(args.array.as_deref().unwrap_or("thickness"));
+    let alignment = match args.align.as_str() {
+        "none" => Alignment::None,
+        "rigid" => Alignment::Rigid,
+        "similarity" => Alignment::Similarity,
+        other => {
+            return Err(CliError::Usage(format!(
+                "--align {other}: expected none, rigid or similarity"
+            )))
+        }
+    };
+    let atoms = template.medial_count();
+    let per_subject = names
+        .iter()
+        .map(|name| match &measure {
+            AtomMeasure::Column(column) => cohort.atoms_column(name, column, atoms),
+            _ => {
+                let fitted = cohort.fitted(name)?;
+                atom_values(&template, &normals, &fitted, &measure, alignment).map_err(|e| {
+                    CliError::Input(format!(
+                        "{}: {e}: was it fitted from another template?",
+                        cohort
+                            .subject_dir(name)
+                            .join("fitted_template.vtk")
+                            .display()
+                    ))
+                })
+            }
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let n = names.len();
+    let values = (0..atoms * n).map(|k| per_subject[k % n][k / n]).collect();
+    let observations = Observations::new(n, values).map_err(stats_error)?;
+    let normal_values = normals
+        .normals()
+        .iter()
+        .flat_map(|n| n.unwrap_or([f64::NAN; 3]))
+        .collect();
+    Ok(Prepared {
+        points: template.medial_points().to_vec(),
+        triangles: template.medial_triangles().to_vec(),
+        support: Support::Points,
+        design,
+        observations,
+        exclude: None,
+        boundary: Some(Boundary {
+            points: template.boundary_points().to_vec(),
+            triangles: template.boundary_triangles().to_vec(),
+            atom_of: template.medial_index().to_vec(),
+        }),
+        extra: vec![array("medial_normal", 3, normal_values, ArrayKind::Field)],
+        source: Source {
+            kind: "cohort",
+            template: Some(template_path),
+            subject_names: Some(names.iter().map(|s| s.to_string()).collect()),
+            left_out: Some(
+                matched
+                    .left_out
+                    .into_iter()
+                    .map(|(subject, why)| LeftOut { subject, why })
+                    .collect(),
+            ),
+            alignment: (measure == AtomMeasure::Displacement).then_some(match alignment {
+                Alignment::None => "none",
+                Alignment::Rigid => "rigid",
+                Alignment::Similarity => "similarity",
+            }),
+        },
+    })
+}
+
+/// Reads, tests every contrast, writes DIR/stats.vtk, DIR/clusters.csv, DIR/clusters_edges.vtk
+/// and DIR/summary.json (with several contrasts, each one's files in DIR/K_NAME/), prints the
+/// summary.
+pub fn run(args: &StatsArgs) -> Result<(), CliError> {
+    let input = if args.input.is_dir() {
+        if !Cohort::is_cohort(&args.input) {
+            return Err(CliError::Input(format!(
+                "{}: a folder without cohort.csv: not a `medial batch` folder",
+                args.input.display()
+            )));
+        }
+        prepare_cohort(args)?
+    } else {
+        if args.template.is_some() {
+            return Err(CliError::Usage(
+                "--template applies to a cohort folder, not to a mesh input".into(),
+            ));
+        }
+        prepare_mesh(args)?
+    };
+    let support = input.support;
+    let points: Vec<[f64; 3]> = input.points.iter().map(|p| [p.x, p.y, p.z]).collect();
+    let triangles = &input.triangles;
+    let mesh = Mesh::new(points.clone(), triangles.clone())
+        .map_err(|e| CliError::Input(format!("{}: {e}", args.input.display())))?;
+    let design = &input.design;
+    let contrasts = args
+        .contrasts
+        .iter()
+        .map(|c| read_contrast(c, design))
+        .collect::<Result<Vec<_>, _>>()?;
     let rows = match &args.row_mask {
         Some(path) => {
             let numbers = medial_stats::design::parse_matrix(&read_text(path)?).map_err(
@@ -380,13 +591,13 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
         }),
         fdr: args.fdr,
         min_observations: args.min_observations,
-        exclude,
+        exclude: input.exclude.clone(),
         rows,
         fwhm: args.fwhm,
     };
     let elements = Elements::new(&mesh, support);
     let study =
-        Study::new(&design, &observations, Some(&elements), options).map_err(stats_error)?;
+        Study::new(design, &input.observations, Some(&elements), options).map_err(stats_error)?;
     let centre = |e: usize| match support {
         Support::Points => points[e],
         Support::Cells => {
@@ -396,6 +607,7 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
     };
     std::fs::create_dir_all(&args.out).map_err(|e| CliError::io(&args.out, e))?;
     let mut summaries = Vec::new();
+    let mut results = Vec::new();
     for (k, contrast) in contrasts.iter().enumerate() {
         let r = study.test(contrast).map_err(stats_error)?;
         let folder = if contrasts.len() == 1 {
@@ -404,11 +616,32 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
             args.out.join(slug(k, contrast.name()))
         };
         std::fs::create_dir_all(&folder).map_err(|e| CliError::io(&folder, e))?;
-        let mut out = PolyData::from_triangles(&data.points, &triangles);
+        let mut out = PolyData::from_triangles(&input.points, triangles);
+        let arrays = result_arrays(&r);
+        if let Some(boundary) = &input.boundary {
+            let mut on_boundary = PolyData::from_triangles(&boundary.points, &boundary.triangles);
+            on_boundary.point_data = arrays
+                .iter()
+                .map(|a| DataArray {
+                    values: boundary
+                        .atom_of
+                        .iter()
+                        .flat_map(|&m| a.values[m * a.components..(m + 1) * a.components].to_vec())
+                        .collect(),
+                    ..a.clone()
+                })
+                .collect();
+            vtk::write_polydata(
+                &folder.join("stats_boundary.vtk"),
+                &on_boundary,
+                write_options(true),
+            )?;
+        }
         if args.cell {
-            out.cell_data = result_arrays(&r);
+            out.cell_data = arrays;
         } else {
-            out.point_data = result_arrays(&r);
+            out.point_data = arrays;
+            out.point_data.extend(input.extra.iter().cloned());
         }
         vtk::write_polydata(&folder.join("stats.vtk"), &out, write_options(true))?;
         if let Some(text) = clusters_csv(&r, &centre) {
@@ -418,7 +651,7 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
             let outline = cluster_outlines(&mesh, support, &c.found.labels);
             let ids = outline.iter().map(|&(_, id)| id as f64).collect();
             let edges = PolyData {
-                points: data.points.clone(),
+                points: input.points.clone(),
                 lines: outline.iter().map(|(pair, _)| pair.to_vec()).collect(),
                 cell_data: vec![DataArray {
                     value_type: ValueType::Int,
@@ -433,11 +666,24 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
             )?;
         }
         summaries.push(contrast_summary(contrast, &r, folder));
+        results.push(r);
     }
+    let array_name = args.array.clone().unwrap_or_else(|| {
+        match input.source.kind {
+            "cohort" => "thickness",
+            _ => "Y",
+        }
+        .into()
+    });
     let summary = Summary {
         input: args.input.clone(),
-        array: args.array.clone(),
-        support: if args.cell { "cells" } else { "points" },
+        source: input.source,
+        array: array_name,
+        support: match support {
+            Support::Cells => "cells",
+            Support::Points if input.boundary.is_some() => "atoms",
+            Support::Points => "points",
+        },
         subjects: study.design().subjects(),
         elements: elements.len(),
         design_columns: design.names().to_vec(),
