@@ -22,6 +22,7 @@
 //! | [`analysis`] | an analysis from data to maps | [`Study`], [`Options`], [`ContrastResult`] |
 //! | [`atoms`] | per-atom measures of fitted medial models (thickness, spokes, displacement along the medial normal) | [`AtomMeasure`], [`SheetNormals`], [`atom_values`] |
 //! | [`shape`] | Procrustes alignment, generalised Procrustes analysis of medial atoms, principal components | [`procrustes`], [`generalised_procrustes`], [`pca()`] |
+//! | [`modes`] | shape modes of a cohort of fitted models: its atoms or boundaries aligned, their principal components, shapes along a mode | [`shape_modes`], [`ShapeModes`], [`ShapeOf`] |
 //! | [`error`] | the one error type | [`StatsError`] |
 
 #![warn(missing_docs)]
@@ -34,6 +35,7 @@ pub mod error;
 pub mod fdr;
 pub mod glm;
 pub mod mesh;
+pub mod modes;
 pub mod permutation;
 pub mod shape;
 
@@ -48,5 +50,6 @@ pub use mesh::{
     cluster_outlines, diffusion_time, find_clusters, smooth, tfce, Cluster, Clusters, Elements,
     Mesh, Support, TfceParameters,
 };
+pub use modes::{shape_modes, ShapeModes, ShapeOf};
 pub use permutation::{NullDistributions, Scheme};
 pub use shape::{generalised_procrustes, pca, procrustes, AtomShape, Gpa, Pca, Similarity};

@@ -139,12 +139,13 @@ pub fn procrustes(source: &[[f64; 3]], target: &[[f64; 3]], scaling: bool) -> Re
     })
 }
 
-/// A medial model's atoms: positions (mm) and radii (mm, the mean spoke length).
+/// A medial model's atoms: positions (mm) and radii (mm, the mean spoke length); or a boundary's
+/// points, without radii.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AtomShape {
-    /// The atoms' positions.
+    /// The atoms' (or boundary points') positions.
     pub points: Vec<[f64; 3]>,
-    /// The atoms' radii.
+    /// The atoms' radii, one per point, or none.
     pub radii: Vec<f64>,
 }
 
@@ -167,9 +168,8 @@ impl AtomShape {
             .collect()
     }
 
-    /// The shape of coordinates `v` (as [`Self::to_vector`] writes them).
-    pub fn from_vector(v: &[f64]) -> Self {
-        let n = v.len() / 4;
+    /// The shape of coordinates `v` (as [`Self::to_vector`] writes them) of `n` points.
+    pub fn from_vector(v: &[f64], n: usize) -> Self {
         Self {
             points: (0..n)
                 .map(|i| [v[3 * i], v[3 * i + 1], v[3 * i + 2]])
@@ -197,8 +197,8 @@ const GPA_ROUNDS: usize = 100;
 /// GPA stops when the mean moves by less than this fraction of its centroid size.
 const GPA_TOLERANCE: f64 = 1e-10;
 
-/// Aligns `shapes` (at least 2, the same atoms each) onto their common mean: rotations and
-/// translations, and with `scaling` scales.
+/// Aligns `shapes` (at least 2, the same atoms each, all with radii or all without) onto their
+/// common mean: rotations and translations, and with `scaling` scales.
 pub fn generalised_procrustes(shapes: &[AtomShape], scaling: bool) -> Result<Gpa> {
     if shapes.len() < 2 {
         return Err(StatsError::Data(format!(
@@ -207,10 +207,11 @@ pub fn generalised_procrustes(shapes: &[AtomShape], scaling: bool) -> Result<Gpa
         )));
     }
     let n = shapes[0].points.len();
+    let radii = shapes[0].radii.len();
     for (k, s) in shapes.iter().enumerate() {
-        if s.points.len() != n || s.radii.len() != n {
+        if s.points.len() != n || s.radii.len() != radii || (radii != 0 && radii != n) {
             return Err(StatsError::Data(format!(
-                "shape {} has {} atoms and {} radii where the first has {n}",
+                "shape {} has {} points and {} radii where the first has {n} and {radii}",
                 k + 1,
                 s.points.len(),
                 s.radii.len()
@@ -283,12 +284,15 @@ pub fn generalised_procrustes(shapes: &[AtomShape], scaling: bool) -> Result<Gpa
 }
 
 /// The coordinate-wise mean of shapes with the same atoms.
-fn average(shapes: &[AtomShape]) -> AtomShape {
+pub(crate) fn average(shapes: &[AtomShape]) -> AtomShape {
     let k = shapes.len() as f64;
     let sum = shapes.iter().skip(1).fold(shapes[0].to_vector(), |acc, s| {
         acc.iter().zip(s.to_vector()).map(|(a, b)| a + b).collect()
     });
-    AtomShape::from_vector(&sum.iter().map(|v| v / k).collect::<Vec<_>>())
+    AtomShape::from_vector(
+        &sum.iter().map(|v| v / k).collect::<Vec<_>>(),
+        shapes[0].points.len(),
+    )
 }
 
 /// Principal components of rows of coordinates.

@@ -6,5 +6,6 @@ mod calibration;
 mod common;
 mod glm;
 mod meshglm;
+mod modes;
 mod permutation;
 mod shape;
