@@ -76,6 +76,31 @@ pub enum Alignment {
     Similarity,
 }
 
+impl Alignment {
+    /// Its name: `none`, `rigid` or `similarity`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::Rigid => "rigid",
+            Self::Similarity => "similarity",
+        }
+    }
+}
+
+impl std::str::FromStr for Alignment {
+    type Err = StatsError;
+
+    /// The alignment of [`Alignment::name`] `name`.
+    fn from_str(name: &str) -> Result<Self> {
+        [Self::None, Self::Rigid, Self::Similarity]
+            .into_iter()
+            .find(|a| a.name() == name)
+            .ok_or_else(|| {
+                StatsError::parameter("alignment", name, "expected none, rigid or similarity")
+            })
+    }
+}
+
 /// The template's medial normal at every atom (`None` at seams and where undefined).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SheetNormals {

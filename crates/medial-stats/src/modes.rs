@@ -34,6 +34,14 @@ pub enum ShapeOf {
 }
 
 impl ShapeOf {
+    /// Its name: `atoms` or `boundary`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Atoms => "atoms",
+            Self::Boundary => "boundary",
+        }
+    }
+
     /// The shape of `model`.
     pub fn shape(self, model: &MedialTemplate) -> AtomShape {
         let points = |p: &[medial_core::Vec3]| p.iter().map(|&p| p.into()).collect();
@@ -51,6 +59,18 @@ impl ShapeOf {
                 radii: Vec::new(),
             },
         }
+    }
+}
+
+impl std::str::FromStr for ShapeOf {
+    type Err = StatsError;
+
+    /// The shapes of [`ShapeOf::name`] `name`.
+    fn from_str(name: &str) -> Result<Self> {
+        [Self::Atoms, Self::Boundary]
+            .into_iter()
+            .find(|a| a.name() == name)
+            .ok_or_else(|| StatsError::parameter("of", name, "expected atoms or boundary"))
     }
 }
 

@@ -5,13 +5,15 @@
 //! [`check`] measures whether the medial points stay the centres of inscribed balls; [`apply`]
 //! carries other data by the map of a fit; [`batch`] fits a cohort of subjects and gathers it;
 //! [`template`] builds a template from a shape (a segmentation or a closed mesh); [`stats`]
-//! tests a design's contrasts at every element of a mesh.
+//! tests a design's contrasts at every element of a mesh or at every atom of a cohort; [`pca`]
+//! finds the shape modes of a cohort.
 
 mod apply;
 mod batch;
 mod check;
 mod eval;
 mod inflate;
+mod pca;
 mod project;
 mod rasterize;
 mod report;
@@ -124,12 +126,20 @@ pub enum Command {
     /// displacement field as a NIfTI warp for ITK, ANTs and greedy. Prints a JSON summary.
     Apply(apply::ApplyArgs),
     /// A general linear model at every point (or cell, --cell) of a mesh whose array holds one
-    /// component per subject, as meshglm takes it: t or F and parametric p, with --permutations
+    /// component per subject, as meshglm takes it, or at every atom of a `medial batch` cohort
+    /// (a measure of each subject's fitted model, --array): t or F and parametric p, with --permutations
     /// the FWER-corrected p of the maximum statistic, of clusters (--threshold) and of TFCE
     /// (--tfce). Writes DIR/stats.vtk (arrays beta, t, p, p_fwer, cluster, p_cluster, tfce,
     /// p_tfce), DIR/clusters.csv, the clusters' outlines DIR/clusters_edges.vtk and
     /// DIR/summary.json (printed too).
     Stats(stats::StatsArgs),
+    /// Shape modes of a `medial batch` cohort: generalised Procrustes alignment of the fitted
+    /// models' medial atoms (positions and radii) or boundaries, principal components. Writes
+    /// DIR/modes.csv (variance and explained fraction of each mode), DIR/scores.csv (subject,
+    /// pc1, …: a design for `medial stats`), the mean shape, each mode's shapes from −2 to +2
+    /// SD as ParaView series (DIR/modeK_boundary.vtk.series, modeK_medial.vtk.series) and
+    /// DIR/summary.json (printed too).
+    Pca(pca::PcaArgs),
 }
 
 /// Parses `--mu`: a positive, finite penalty weight.
@@ -217,6 +227,7 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
         Command::Batch(args) => batch::run(&args, threads, quiet)?,
         Command::Apply(args) => apply::run(&args)?,
         Command::Stats(args) => stats::run(&args)?,
+        Command::Pca(args) => pca::run(&args)?,
     }
     Ok(())
 }

@@ -21,7 +21,7 @@ const EFFECT: f64 = 0.2;
 /// The noise: spokes scaled by up to ±4 %.
 const NOISE: f64 = 0.04;
 
-fn toy() -> MedialTemplate {
+pub fn toy() -> MedialTemplate {
     match medial_io::model::read_model(Path::new(TOY)).unwrap() {
         Model::Medial(t) => *t,
         Model::Plain(_) => panic!("the toy is medial"),
@@ -29,12 +29,12 @@ fn toy() -> MedialTemplate {
 }
 
 /// The atoms of the planted effect: those at the +z end of the toy's sheet.
-fn planted(template: &MedialTemplate) -> Vec<bool> {
+pub fn planted(template: &MedialTemplate) -> Vec<bool> {
     template.medial_points().iter().map(|p| p.z > 6.0).collect()
 }
 
 /// A uniform number in [−1, 1) from a seed (splitmix64).
-fn noise(seed: u64) -> f64 {
+pub fn noise(seed: u64) -> f64 {
     let mut z = seed.wrapping_add(0x9e37_79b9_7f4a_7c15);
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
@@ -43,7 +43,7 @@ fn noise(seed: u64) -> f64 {
 }
 
 /// The toy with atom m's spokes scaled by `scale[m]` about its medial point.
-fn scaled(template: &MedialTemplate, scale: &[f64]) -> MedialTemplate {
+pub fn scaled(template: &MedialTemplate, scale: &[f64]) -> MedialTemplate {
     let mut q = template.landmarks().to_vec();
     for (b, &m) in template.medial_index().iter().enumerate() {
         let centre = q[template.atom_landmark(m)];
@@ -52,48 +52,58 @@ fn scaled(template: &MedialTemplate, scale: &[f64]) -> MedialTemplate {
     template.with_landmarks(&q).unwrap()
 }
 
-/// Writes the cohort folder `dir/cohort`: subjects a1…a6 and b1…b6 (b's planted atoms
-/// thickened) and `gone` (its fit failed, no folder), each fit's config naming the toy; returns
-/// the folder and every subject's thickness (by name).
+/// Writes the cohort folder `dir/cohort` of `subjects` (name and "fitted" model: each a folder
+/// with fitted_template.vtk and a config.toml naming the toy) and `gone` (its fit failed, no
+/// folder); returns the folder.
+pub fn write_cohort(dir: &Path, subjects: &[(String, MedialTemplate)]) -> PathBuf {
+    let out = dir.join("cohort");
+    let mut table = String::from("subject,status,dice\n");
+    for (name, fitted) in subjects {
+        let folder = out.join(name);
+        std::fs::create_dir_all(&folder).unwrap();
+        medial_io::cmrep::write_template(
+            &folder.join("fitted_template.vtk"),
+            fitted,
+            medial_io::vtk::WriteOptions::default(),
+        )
+        .unwrap();
+        std::fs::write(
+            folder.join("config.toml"),
+            format!("[model]\ntemplate = {TOY:?}\n"),
+        )
+        .unwrap();
+        table.push_str(&format!("{name},budget,0.9\n"));
+    }
+    table.push_str("gone,failed,\n");
+    std::fs::write(out.join("cohort.csv"), table).unwrap();
+    out
+}
+
+/// The cohort of subjects a1…a6 and b1…b6 (b's planted atoms thickened) and `gone`; returns
+/// its folder and every subject's thickness (by name).
 fn cohort(dir: &Path) -> (PathBuf, Vec<(String, Vec<f64>)>) {
     let template = toy();
     let planted = planted(&template);
-    let out = dir.join("cohort");
-    let mut table = String::from("subject,status,dice\n");
-    let mut thickness = Vec::new();
+    let mut subjects = Vec::new();
     for (g, group) in ["a", "b"].iter().enumerate() {
         for k in 1..=PER_GROUP {
-            let name = format!("{group}{k}");
             let scale: Vec<f64> = (0..template.medial_count())
                 .map(|m| {
                     let e = if g == 1 && planted[m] { EFFECT } else { 0.0 };
                     1.0 + e + NOISE * noise((g * 1000 + k * 100 + m) as u64)
                 })
                 .collect();
-            let fitted = scaled(&template, &scale);
-            let folder = out.join(&name);
-            std::fs::create_dir_all(&folder).unwrap();
-            medial_io::cmrep::write_template(
-                &folder.join("fitted_template.vtk"),
-                &fitted,
-                medial_io::vtk::WriteOptions::default(),
-            )
-            .unwrap();
-            std::fs::write(
-                folder.join("config.toml"),
-                format!("[model]\ntemplate = {TOY:?}\n"),
-            )
-            .unwrap();
-            table.push_str(&format!("{name},budget,0.9\n"));
-            thickness.push((
-                name,
-                SpokeMetrics::compute(&fitted, fitted.landmarks()).thickness,
-            ));
+            subjects.push((format!("{group}{k}"), scaled(&template, &scale)));
         }
     }
-    table.push_str("gone,failed,\n");
-    std::fs::write(out.join("cohort.csv"), table).unwrap();
-    (out, thickness)
+    let thickness = subjects
+        .iter()
+        .map(|(name, fitted)| {
+            let t = SpokeMetrics::compute(fitted, fitted.landmarks()).thickness;
+            (name.clone(), t)
+        })
+        .collect();
+    (write_cohort(dir, &subjects), thickness)
 }
 
 /// A design of the subjects `a…` (group a) and `b…` (group b), and `gone` in group `b`;

@@ -7,6 +7,7 @@ use crate::error::CliError;
 use medial_core::model::Model;
 use medial_core::MedialTemplate;
 use medial_stats::design::Candidate;
+use serde::Serialize;
 use std::path::{Path, PathBuf};
 
 /// The subjects of a cohort folder and the status of each one's fit.
@@ -15,6 +16,23 @@ pub struct Cohort {
     pub dir: PathBuf,
     /// Every subject of `cohort.csv`, in its order: name and status.
     pub subjects: Vec<(String, String)>,
+}
+
+/// A subject of the cohort whose fit is not used, and why.
+#[derive(Serialize)]
+pub struct LeftOut {
+    /// The subject's name.
+    pub subject: String,
+    /// Why its fit is not used.
+    pub why: String,
+}
+
+impl LeftOut {
+    /// The subject `subject`, left out because `why`, noted on stderr.
+    pub fn noted(subject: String, why: String) -> Self {
+        eprintln!("subject '{subject}' left out: {why}");
+        Self { subject, why }
+    }
 }
 
 /// The statuses of the fits whose models are used (sound and within their tolerances, as
@@ -73,6 +91,19 @@ impl Cohort {
                 }),
             })
             .collect()
+    }
+
+    /// The usable subjects in the table's order, and the others (each noted on stderr).
+    pub fn usable(&self) -> (Vec<&str>, Vec<LeftOut>) {
+        let mut usable = Vec::new();
+        let mut left_out = Vec::new();
+        for c in self.candidates() {
+            match c.unusable {
+                None => usable.push(c.name),
+                Some(why) => left_out.push(LeftOut::noted(c.name.into(), why.into())),
+            }
+        }
+        (usable, left_out)
     }
 
     /// The folder of subject `name`.

@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 
 pub mod cohort;
 
-use cohort::Cohort;
+use cohort::{Cohort, LeftOut};
 
 /// Test a design's contrasts at every element of a mesh.
 #[derive(clap::Args, Debug)]
@@ -51,7 +51,7 @@ pub struct StatsArgs {
     /// first: none, rigid (rotation and translation of the medial points, least squares) or
     /// similarity (and scale).
     #[arg(long, value_name = "HOW", default_value = "rigid")]
-    pub align: String,
+    pub align: Alignment,
     /// The array is on the triangles (CELL_DATA), not the points.
     #[arg(long)]
     pub cell: bool,
@@ -330,13 +330,6 @@ struct Boundary {
     atom_of: Vec<usize>,
 }
 
-/// A subject of the cohort that the design names but whose fit is not used.
-#[derive(Serialize)]
-struct LeftOut {
-    subject: String,
-    why: String,
-}
-
 /// The input as the summary records it.
 #[derive(Serialize)]
 struct Source {
@@ -451,9 +444,11 @@ fn prepare_cohort(args: &StatsArgs) -> Result<Prepared, CliError> {
     let matched = read_design(args)?
         .match_subjects(&cohort.candidates())
         .map_err(|e| CliError::Input(format!("{}: {e}", args.design.display())))?;
-    for (name, why) in &matched.left_out {
-        eprintln!("subject '{name}' left out: {why}");
-    }
+    let left_out = matched
+        .left_out
+        .into_iter()
+        .map(|(subject, why)| LeftOut::noted(subject, why))
+        .collect();
     let design = matched.design;
     let names: Vec<&str> = matched
         .subjects
@@ -463,16 +458,7 @@ fn prepare_cohort(args: &StatsArgs) -> Result<Prepared, CliError> {
     let (template_path, template) = cohort.template(args.template.as_deref(), &names)?;
     let normals = SheetNormals::new(&template);
     let measure = AtomMeasure::parse(args.array.as_deref().unwrap_or("thickness"));
-    let alignment = match args.align.as_str() {
-        "none" => Alignment::None,
-        "rigid" => Alignment::Rigid,
-        "similarity" => Alignment::Similarity,
-        other => {
-            return Err(CliError::Usage(format!(
-                "--align {other}: expected none, rigid or similarity"
-            )))
-        }
-    };
+    let alignment = args.align;
     let atoms = template.medial_count();
     let per_subject = names
         .iter()
@@ -517,18 +503,8 @@ fn prepare_cohort(args: &StatsArgs) -> Result<Prepared, CliError> {
             kind: "cohort",
             template: Some(template_path),
             subject_names: Some(names.iter().map(|s| s.to_string()).collect()),
-            left_out: Some(
-                matched
-                    .left_out
-                    .into_iter()
-                    .map(|(subject, why)| LeftOut { subject, why })
-                    .collect(),
-            ),
-            alignment: (measure == AtomMeasure::Displacement).then_some(match alignment {
-                Alignment::None => "none",
-                Alignment::Rigid => "rigid",
-                Alignment::Similarity => "similarity",
-            }),
+            left_out: Some(left_out),
+            alignment: (measure == AtomMeasure::Displacement).then_some(alignment.name()),
         },
     })
 }
