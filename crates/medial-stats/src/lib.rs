@@ -22,6 +22,7 @@
 //! | [`analysis`] | an analysis from data to maps | [`Study`], [`Options`], [`ContrastResult`] |
 //! | [`atoms`] | per-atom measures of fitted medial models (thickness, spokes, displacement along the medial normal) | [`AtomMeasure`], [`SheetNormals`], [`atom_values`] |
 //! | [`shape`] | Procrustes alignment, generalised Procrustes analysis of medial atoms, principal components | [`procrustes`], [`generalised_procrustes`], [`pca()`] |
+//! | [`mean`] | one round of a population template: the fitted models averaged after Procrustes, projected onto the medial constraints | [`mean_template`], [`MeanTemplate`] |
 //! | [`modes`] | shape modes of a cohort of fitted models: its atoms or boundaries aligned, their principal components, shapes along a mode | [`shape_modes`], [`ShapeModes`], [`ShapeOf`] |
 //! | [`error`] | the one error type | [`StatsError`] |
 
@@ -34,6 +35,7 @@ pub mod design;
 pub mod error;
 pub mod fdr;
 pub mod glm;
+pub mod mean;
 pub mod mesh;
 pub mod modes;
 pub mod permutation;
@@ -46,6 +48,7 @@ pub use design::{Candidate, Design, Matched, TableOptions};
 pub use error::{Result, StatsError};
 pub use fdr::q_values;
 pub use glm::{Glm, GlmOptions, Observations, Tail};
+pub use mean::{mean_template, MeanTemplate};
 pub use mesh::{
     cluster_outlines, diffusion_time, find_clusters, smooth, tfce, Cluster, Clusters, Elements,
     Mesh, Support, TfceParameters,

@@ -1,11 +1,12 @@
-//! Shape modes of cohorts made from the shipped toy template: copies moved rigidly (no mode, the
-//! mean boundary the toy's) and a planted thickening of one end (one mode, its scores the
-//! planted amounts).
+//! Shape modes and mean templates of cohorts made from the shipped toy template: copies moved
+//! rigidly (no mode, the mean boundary the toy's), a planted thickening of one end (one mode,
+//! its scores the planted amounts), thickened and thinned copies (their mean the toy).
 
+use medial_core::construction::project::ProjectOptions;
 use medial_core::model::Model;
 use medial_core::{MedialTemplate, Vec3};
 use medial_stats::shape::procrustes;
-use medial_stats::{shape_modes, Alignment, ShapeOf};
+use medial_stats::{mean_template, shape_modes, Alignment, ShapeOf};
 use nalgebra::Rotation3;
 use std::path::Path;
 
@@ -138,4 +139,37 @@ fn a_planted_thickening_is_the_first_mode() {
             "{of:?}: {rest} vs {ratio}"
         );
     }
+}
+
+#[test]
+fn the_mean_template_of_thickened_and_thinned_copies_is_the_toy() {
+    let t = toy();
+    let options = ProjectOptions::default();
+    // Without alignment: the average of spokes 10 % longer and 10 % shorter is the toy.
+    let pair = [subject(&t, |_| 1.1, 0.0), subject(&t, |_| 0.9, 0.0)];
+    let mean = mean_template(&pair, &t, Alignment::None, &options).unwrap();
+    assert!(mean.change < 1e-9, "moved {} mm from the toy", mean.change);
+    assert!(mean.after.max_spoke_normal_deg <= 0.1 && mean.after.max_mismatch <= 1e-3);
+    // Copies of the thickened toy moved rigidly: GPA brings them together, the mean is placed
+    // on the toy and its landmarks are the thickened toy's.
+    let copies: Vec<MedialTemplate> = (0..3)
+        .map(|k| subject(&t, |_| 1.1, 0.4 * k as f64))
+        .collect();
+    let mean = mean_template(&copies, &t, Alignment::Rigid, &options).unwrap();
+    let thick = subject(&t, |_| 1.1, 0.0);
+    let as_points =
+        |m: &MedialTemplate| -> Vec<[f64; 3]> { m.landmarks().iter().map(|&p| p.into()).collect() };
+    let onto = procrustes(&as_points(&thick), &as_points(&mean.template), false).unwrap();
+    let placed: Vec<[f64; 3]> = as_points(&thick).iter().map(|&p| onto.apply(p)).collect();
+    let e = rms(&placed, &as_points(&mean.template));
+    assert!(
+        e < 1e-6 + mean.projection_rms,
+        "{e} mm off the thickened toy"
+    );
+    assert!(
+        mean.change > 0.1,
+        "the thickening is a change: {}",
+        mean.change
+    );
+    assert!(mean_template(&copies[..1], &t, Alignment::Rigid, &options).is_err());
 }
