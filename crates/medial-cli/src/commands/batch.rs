@@ -61,29 +61,104 @@ pub struct BatchArgs {
 
 /// Runs `medial batch` with `threads` worker threads in use.
 pub fn run(args: &BatchArgs, threads: usize, quiet: bool) -> Result<(), CliError> {
-    let template = medial_io::model::read_model(&args.template)?;
-    let subjects = subjects::read(&args.subjects, &args.template)?;
-    if let Some(base) = &args.config {
-        subjects::check_base(&Config::load(base)?, base, &subjects)?;
-    } else if subjects[0].transform.is_some() {
-        return Err(CliError::Subjects {
-            path: args.subjects.clone(),
-            message: "the 'transform' column needs --config BASE.toml with an SSD stage that \
-                      aligns by a transform (without a config the initial map is found from \
-                      the data)"
-                .into(),
-        });
-    }
-    let dir = std::path::absolute(&args.out).map_err(|e| CliError::io(&args.out, e))?;
+    let checked = Checked::of(args)?;
     if args.slurm {
-        return write_slurm(args, &dir, subjects.len());
+        return write_slurm(args, &checked.dir, checked.subjects.len());
     }
-    let names: Vec<&str> = subjects.iter().map(|s| s.name.as_str()).collect();
-    if args.gather_only {
-        let gathered = gather::gather(&dir, &template, &names)?;
-        print_json(&gathered)?;
-        return judge(&gathered, &gathered.failed, &dir);
+    let (gathered, outcome) = if args.gather_only {
+        let names = checked.names();
+        let gathered = gather::gather(&checked.dir, &checked.template, &names)?;
+        let outcome = judge(&gathered, &gathered.failed, &checked.dir);
+        (gathered, outcome)
+    } else {
+        fit_checked(args, &checked, threads, quiet)?
+    };
+    print_json(&gathered)?;
+    outcome
+}
+
+impl BatchArgs {
+    /// The arguments of `medial batch TEMPLATE SUBJECTS --out DIR [--config BASE]` (every
+    /// other option at its default).
+    pub fn fit(template: &Path, subjects: &Path, out: &Path, config: Option<&Path>) -> Self {
+        #[derive(clap::Parser)]
+        struct Line {
+            #[command(flatten)]
+            batch: BatchArgs,
+        }
+        let mut line = vec![
+            "batch".as_ref(),
+            template.as_os_str(),
+            subjects.as_os_str(),
+            "--out".as_ref(),
+            out.as_os_str(),
+        ];
+        if let Some(base) = config {
+            line.extend(["--config".as_ref(), base.as_os_str()]);
+        }
+        <Line as clap::Parser>::parse_from(line).batch
     }
+}
+
+/// Fits the subjects (those of the shard) and gathers the cohort, as `medial batch` without
+/// `--gather-only` or `--slurm` does but print; returns what it prints and its outcome (the
+/// error of the subjects that failed or of a fit stopped by a signal, after the gathering).
+pub fn fit_and_gather(
+    args: &BatchArgs,
+    threads: usize,
+    quiet: bool,
+) -> Result<(Gathered, Result<(), CliError>), CliError> {
+    fit_checked(args, &Checked::of(args)?, threads, quiet)
+}
+
+/// The inputs of a batch, read and checked.
+struct Checked {
+    template: medial_core::model::Model,
+    subjects: Vec<Subject>,
+    /// The cohort folder, absolute.
+    dir: PathBuf,
+}
+
+impl Checked {
+    fn of(args: &BatchArgs) -> Result<Self, CliError> {
+        let template = medial_io::model::read_model(&args.template)?;
+        let subjects = subjects::read(&args.subjects, &args.template)?;
+        if let Some(base) = &args.config {
+            subjects::check_base(&Config::load(base)?, base, &subjects)?;
+        } else if subjects[0].transform.is_some() {
+            return Err(CliError::Subjects {
+                path: args.subjects.clone(),
+                message: "the 'transform' column needs --config BASE.toml with an SSD stage that \
+                          aligns by a transform (without a config the initial map is found from \
+                          the data)"
+                    .into(),
+            });
+        }
+        let dir = std::path::absolute(&args.out).map_err(|e| CliError::io(&args.out, e))?;
+        Ok(Self {
+            template,
+            subjects,
+            dir,
+        })
+    }
+
+    fn names(&self) -> Vec<&str> {
+        self.subjects.iter().map(|s| s.name.as_str()).collect()
+    }
+}
+
+/// Fits the checked subjects of `args`' shard and gathers the cohort.
+fn fit_checked(
+    args: &BatchArgs,
+    checked: &Checked,
+    threads: usize,
+    quiet: bool,
+) -> Result<(Gathered, Result<(), CliError>), CliError> {
+    let Checked {
+        template,
+        subjects,
+        dir,
+    } = checked;
     let shard = match args.shard {
         Some(shard) => Some(shard),
         None => Shard::from_slurm(|name| std::env::var(name).ok())?,
@@ -97,11 +172,10 @@ pub fn run(args: &BatchArgs, threads: usize, quiet: bool) -> Result<(), CliError
     for subject in &mine {
         result_folder_or_none(&dir.join(&subject.name), &subject.name, &args.subjects)?;
     }
-    let stopped = fit_all(&mine, args.config.as_deref(), &dir, threads, quiet)?;
-    let gathered = gather::gather(&dir, &template, &names)?;
-    print_json(&gathered)?;
+    let stopped = fit_all(&mine, args.config.as_deref(), dir, threads, quiet)?;
+    let gathered = gather::gather(dir, template, &checked.names())?;
     if let Some(interrupted) = stopped {
-        return Err(interrupted);
+        return Ok((gathered, Err(interrupted)));
     }
     let failed: Vec<String> = gathered
         .failed
@@ -109,7 +183,8 @@ pub fn run(args: &BatchArgs, threads: usize, quiet: bool) -> Result<(), CliError
         .filter(|f| mine.iter().any(|s| &s.name == *f))
         .cloned()
         .collect();
-    judge(&gathered, &failed, &dir)
+    let outcome = judge(&gathered, &failed, dir);
+    Ok((gathered, outcome))
 }
 
 /// Fits `subjects` into `dir` one after the other; returns the error of a fit stopped by a

@@ -6,13 +6,14 @@
 //! carries other data by the map of a fit; [`batch`] fits a cohort of subjects and gathers it;
 //! [`template`] builds a template from a shape (a segmentation or a closed mesh); [`stats`]
 //! tests a design's contrasts at every element of a mesh or at every atom of a cohort; [`pca`]
-//! finds the shape modes of a cohort.
+//! finds the shape modes of a cohort; [`mean`] builds a population template from one.
 
 mod apply;
 mod batch;
 mod check;
 mod eval;
 mod inflate;
+mod mean;
 mod pca;
 mod project;
 mod rasterize;
@@ -140,6 +141,13 @@ pub enum Command {
     /// SD as ParaView series (DIR/modeK_boundary.vtk.series, modeK_medial.vtk.series) and
     /// DIR/summary.json (printed too).
     Pca(pca::PcaArgs),
+    /// A population template: fits the subjects by `medial batch` from the template, averages
+    /// the fits after generalised Procrustes alignment, projects the average onto the medial
+    /// constraints and fits again from it, until a round moves it by at most --tolerance mm
+    /// (RMS) or --rounds are done. Writes DIR/roundK/ (each round's batch),
+    /// DIR/template_K.vtk, DIR/mean_template.vtk, DIR/rounds.csv (the change per round) and
+    /// DIR/summary.json (printed too).
+    Mean(mean::MeanArgs),
 }
 
 /// Parses `--mu`: a positive, finite penalty weight.
@@ -228,6 +236,7 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
         Command::Apply(args) => apply::run(&args)?,
         Command::Stats(args) => stats::run(&args)?,
         Command::Pca(args) => pca::run(&args)?,
+        Command::Mean(args) => mean::run(&args, threads, quiet)?,
     }
     Ok(())
 }

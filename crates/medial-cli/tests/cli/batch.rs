@@ -10,13 +10,13 @@ use std::path::{Path, PathBuf};
 
 const EXAMPLES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../examples");
 
-fn toy_template() -> PathBuf {
+pub fn toy_template() -> PathBuf {
     Path::new(EXAMPLES).join("toy/template.vtk")
 }
 
 /// A short constrained SSD schedule for the toy (its target replaced per subject), with wide
 /// tolerances so that every fit ends sound within them.
-fn base_config(dir: &Path) -> PathBuf {
+pub fn base_config(dir: &Path) -> PathBuf {
     let path = dir.join("base.toml");
     let text = format!(
         "[model]\ntemplate = {:?}\n\n[flow]\nsigma = 2.0\ntime_steps = 5\nkinetic_weight = 0.005\n\n\
@@ -30,7 +30,7 @@ fn base_config(dir: &Path) -> PathBuf {
 }
 
 /// The toy bent by `bend` degrees, its boundary points written to `dir/bend<bend>/`.
-fn bent_toy(dir: &Path, bend: i32) -> PathBuf {
+pub fn bent_toy(dir: &Path, bend: i32) -> PathBuf {
     let out = dir.join(format!("bend{bend}"));
     let o = medial(&[
         "synth",
@@ -48,7 +48,7 @@ fn bent_toy(dir: &Path, bend: i32) -> PathBuf {
 }
 
 /// Writes `SUBJECTS.csv` in `dir` with a `target` column from `(subject, path)` pairs.
-fn table(dir: &Path, rows: &[(&str, &Path)]) -> PathBuf {
+pub fn table(dir: &Path, rows: &[(&str, &Path)]) -> PathBuf {
     let mut csv = String::from("subject,target\n");
     for (name, path) in rows {
         csv.push_str(&format!("{name},{}\n", s(path)));

@@ -13,6 +13,7 @@ mod check;
 mod fit;
 mod guards;
 mod inflate;
+mod mean;
 mod pca;
 mod reliability;
 mod resume;
