@@ -318,6 +318,8 @@ struct Prepared {
     boundary: Option<Boundary>,
     /// Point arrays written beside the results (a cohort's medial normals).
     extra: Vec<DataArray>,
+    /// The array (or a cohort's measure) tested.
+    array: String,
     /// What the summary says of the input.
     source: Source,
 }
@@ -415,6 +417,7 @@ fn prepare_mesh(args: &StatsArgs) -> Result<Prepared, CliError> {
         exclude,
         boundary: None,
         extra: Vec::new(),
+        array: array_name.into(),
         source: Source {
             kind: "mesh",
             template: None,
@@ -457,7 +460,8 @@ fn prepare_cohort(args: &StatsArgs) -> Result<Prepared, CliError> {
         .collect();
     let (template_path, template) = cohort.template(args.template.as_deref(), &names)?;
     let normals = SheetNormals::new(&template);
-    let measure = AtomMeasure::parse(args.array.as_deref().unwrap_or("thickness"));
+    let array_name = args.array.as_deref().unwrap_or("thickness");
+    let measure = AtomMeasure::parse(array_name);
     let alignment = args.align;
     let atoms = template.medial_count();
     let per_subject = names
@@ -499,6 +503,7 @@ fn prepare_cohort(args: &StatsArgs) -> Result<Prepared, CliError> {
             atom_of: template.medial_index().to_vec(),
         }),
         extra: vec![array("medial_normal", 3, normal_values, ArrayKind::Field)],
+        array: array_name.into(),
         source: Source {
             kind: "cohort",
             template: Some(template_path),
@@ -644,17 +649,10 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
         summaries.push(contrast_summary(contrast, &r, folder));
         results.push(r);
     }
-    let array_name = args.array.clone().unwrap_or_else(|| {
-        match input.source.kind {
-            "cohort" => "thickness",
-            _ => "Y",
-        }
-        .into()
-    });
     let summary = Summary {
         input: args.input.clone(),
         source: input.source,
-        array: array_name,
+        array: input.array,
         support: match support {
             Support::Cells => "cells",
             Support::Points if input.boundary.is_some() => "atoms",
