@@ -49,7 +49,16 @@ struct Cli {
 
 /// Parses the command line, runs the command, prints an error as one line; the exit code.
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    main_with(std::env::args_os())
+}
+
+/// [`main`] with the command line `args` (the program's name first), for a test that runs a
+/// command in its own process ([`before_each_commit_step`]).
+#[doc(hidden)]
+pub fn main_with<T: Into<std::ffi::OsString> + Clone>(
+    args: impl IntoIterator<Item = T>,
+) -> ExitCode {
+    let cli = Cli::parse_from(args);
     tracing_subscriber::fmt()
         .with_writer(std::io::stderr)
         .with_target(false)
@@ -65,6 +74,15 @@ pub fn main() -> ExitCode {
             ExitCode::from(e.exit_code())
         }
     }
+}
+
+/// Calls `hook` with 1, 2, … before each file operation (a link, a rename, a removal) of the
+/// commit of a result set in this process: the kill-anywhere test of the crash-safe commit
+/// (`tests/cli/reliability.rs`, decision 0300) kills its process at the n-th. The binary never
+/// sets one, and there is no option or variable to set one.
+#[doc(hidden)]
+pub fn before_each_commit_step(hook: fn(usize)) {
+    results::before_each_step(hook);
 }
 
 /// Stack of each worker thread: the main thread's usual 8 MiB, as the whole command runs on

@@ -1,20 +1,36 @@
-//! Results as a set: the files of a run are written into a staging folder inside the output
-//! folder, `DIR/.medial-staging-<pid>/`, then moved into `DIR` one by one, the set's marker
-//! (`summary.json` for a fit) last and listing every other file of the set.
+//! Results as a set, committed so that a SIGKILL at any instant leaves the output folder showing
+//! the earlier set or the new one whole, every file byte-identical to one of them (decision
+//! 0300).
 //!
-//! A reader of `DIR` tells a complete set from a partial one by the marker: present, it names
-//! the files of one run, all of them in place; absent, a set is being (or was being) moved in.
-//! The marker of the set it replaces is removed before the first file moves, so a kill during
-//! the moves never leaves an old marker beside new files. Until then the earlier run's files
-//! stay byte-identical; files of the earlier set that the new one does not have are removed
-//! before the new marker moves in. What an interrupted run leaves (staging folders, the
-//! temporary files of atomic writes, `*.part` files) is removed when the next run starts
-//! ([`ResultSet::begin`]). One run at a time may write into a folder.
+//! A result folder `DIR` holds
+//! - `DIR/.medial-sets/<n>/`: the files of a set (generation `n`) at their relative paths;
+//! - `DIR/.medial-sets/current`: a symbolic link to `<n>`, the set the folder shows;
+//! - `DIR/<file>` (and `DIR/flow/<file>`): a symbolic link `.medial-sets/current/<file>`
+//!   (`../.medial-sets/current/flow/<file>`), the same for every set that has the file.
+//!
+//! A run writes its files into a staging folder, `DIR/.medial-staging-<pid>/`, the set's
+//! marker (`summary.json` for a fit) last, listing every other file. The commit
+//! ([`ResultSet::commit`]): every destination is checked (nothing changes on a refusal); the
+//! regular files the folder shows at the set's paths or as files of the earlier set (a folder
+//! of the layout before, `medial report` run again, a periodic checkpoint) are hard-linked
+//! into the shown generation and replaced by their links, each showing the same bytes all
+//! along; the staging folder becomes generation `n + 1`; the links of its new files are made
+//! (dangling until the switch); one rename of a new `current` link switches every link at
+//! once; then the links of files the new set lacks and the earlier generations are removed,
+//! only the tool's own, proven by place: a link whose text is exactly its own
+//! `.medial-sets/current/…` pattern, a generation folder under `DIR/.medial-sets`. What an
+//! interrupted run leaves (staging folders, temporary files and links, `*.part` files) is
+//! removed when the next run starts ([`ResultSet::begin`]); generations a kill left behind, by
+//! the next commit. One run at a time may write into a folder.
 
 use crate::error::CliError;
 use serde::Deserialize;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+
+/// The names the tool gives its own files and folders start so (temporary files, staging
+/// folders, the generations' folder).
+const TOOL_NAMESPACE: &str = ".medial-";
 
 /// The name of a staging folder starts so, followed by the process id.
 const STAGING_PREFIX: &str = ".medial-staging-";
@@ -85,41 +101,95 @@ impl ResultSet {
         self.files.iter().cloned().collect()
     }
 
-    /// Moves the set into the result folder. `write_marker` writes the marker file `marker`
-    /// at the staging path it is given, from the sorted list of the set's other files; then
-    /// the earlier marker is removed, every other file moves in, the earlier set's files that
-    /// this one lacks (and the retired ones) are removed, the new marker moves in last, and the
-    /// staging folder goes.
+    /// Commits the set into the result folder (the module's layout and steps).
+    /// `write_marker` writes the marker file `marker` at the staging path it is given, from the
+    /// sorted list of the set's other files. Refused with one line, before anything changes,
+    /// when a destination leads out of the folder or holds something else than a regular file
+    /// or the tool's own link.
     pub fn commit(
         mut self,
         marker: &str,
         write_marker: impl FnOnce(&Path, Vec<String>) -> Result<(), CliError>,
     ) -> Result<(), CliError> {
         let files = self.files();
-        write_marker(&self.file(marker)?, files.clone())?;
+        write_marker(&self.file(marker)?, files)?;
+        let all = self.files.clone();
         let root = canonical(&self.dir)?;
-        // Every destination is checked before anything changes: a refusal leaves the earlier
-        // set as it was.
-        let destinations = files
-            .iter()
-            .chain(std::iter::once(&marker.to_string()))
-            .map(|relative| Ok((relative.clone(), destination(&root, &self.dir, relative)?)))
-            .collect::<Result<Vec<_>, CliError>>()?;
-        let earlier = listed_files(&self.dir.join(marker));
-        remove_own(&root, &self.dir, marker)?;
-        for (relative, to) in &destinations[..files.len()] {
-            let from = self.staging.join(relative);
-            std::fs::rename(&from, to).map_err(|e| CliError::io(to, e))?;
+        for relative in &all {
+            check_destination(&root, &self.dir, relative)?;
         }
-        let kept: BTreeSet<&String> = files.iter().collect();
-        for stale in earlier.iter().chain(&self.retired) {
-            if !kept.contains(stale) {
-                remove_own(&root, &self.dir, stale)?;
+        let sets = sets_folder(&root, &self.dir)?;
+        let earlier = listed_files(&root.join(marker));
+        let mut steps = Steps(0);
+        // The regular files the folder shows (the earlier set's, and whatever is at the new
+        // set's paths): hard-linked into the shown generation, then replaced by their links.
+        let plain: BTreeSet<String> = (earlier.iter().chain(&self.retired).chain(&all))
+            .filter(|relative| is_plain_file(&root, relative))
+            .cloned()
+            .collect();
+        for relative in &earlier {
+            let path = root.join(relative);
+            let own = is_plain_file(&root, relative) || is_own_link(&root, relative);
+            if !own && std::fs::symlink_metadata(&path).is_ok() {
+                tracing::warn!(
+                    "{}: listed by the earlier set but not a file of the tool inside the output \
+                     folder: left as it is",
+                    self.dir.join(relative).display()
+                );
             }
         }
-        let to = &destinations[files.len()].1;
-        std::fs::rename(self.staging.join(marker), to).map_err(|e| CliError::io(to, e))?;
-        sync_dir(&self.dir);
+        if !plain.is_empty() {
+            let shown = current_generation(&sets);
+            let generation = match shown {
+                Some(n) => n,
+                None => next_generation(&sets),
+            };
+            for relative in &plain {
+                let to = sets.join(generation.to_string()).join(relative);
+                adopt_file(&root.join(relative), &to, &mut steps)?;
+            }
+            if shown.is_none() {
+                switch(&sets, generation, &mut steps)?;
+            }
+            for relative in &plain {
+                make_link(&root, relative, &mut steps)?;
+            }
+        }
+        // The new set becomes a generation; the links of its new files dangle until the switch.
+        let generation = next_generation(&sets);
+        let folder = sets.join(generation.to_string());
+        steps.next();
+        std::fs::rename(&self.staging, &folder).map_err(|e| CliError::io(&folder, e))?;
+        // An empty staging folder again: another run still sees this one writing.
+        steps.next();
+        create_dir(&self.staging)?;
+        for relative in &all {
+            if !is_own_link(&root, relative) {
+                make_link(&root, relative, &mut steps)?;
+            }
+        }
+        for synced in [folder.join("flow"), folder, root.join("flow"), root.clone()] {
+            sync_dir(&synced);
+        }
+        switch(&sets, generation, &mut steps)?;
+        // The switch is made: what the earlier sets had and this one lacks goes.
+        let stale: BTreeSet<String> = (earlier.into_iter().chain(self.retired.clone()))
+            .chain(plain)
+            .chain(links_in(&root))
+            .filter(|relative| !all.contains(relative))
+            .collect();
+        for relative in &stale {
+            if is_own_link(&root, relative) {
+                steps.next();
+                remove_if_present(&root.join(relative))?;
+            }
+        }
+        for earlier in generations(&sets).into_iter().filter(|&n| n != generation) {
+            remove_tree(&sets.join(earlier.to_string()), &mut steps)?;
+        }
+        for synced in [root.join("flow"), root.clone(), sets] {
+            sync_dir(&synced);
+        }
         Ok(())
     }
 }
@@ -132,18 +202,47 @@ impl Drop for ResultSet {
     }
 }
 
+/// The folder of the generations of a result folder, under `DIR/` (canonical `root`).
+const SETS: &str = ".medial-sets";
+
+/// The link in [`SETS`] to the generation the result folder shows.
+const CURRENT: &str = "current";
+
+/// The test hook of [`before_each_step`].
+static STEP_HOOK: std::sync::OnceLock<fn(usize)> = std::sync::OnceLock::new();
+
+/// Calls `hook` with 1, 2, … before each file operation of a commit in this process (for the
+/// kill-anywhere test, which kills its process at the n-th; the binary never sets one).
+pub fn before_each_step(hook: fn(usize)) {
+    let _ = STEP_HOOK.set(hook);
+}
+
+/// The file operations of a commit so far ([`before_each_step`]).
+struct Steps(usize);
+
+impl Steps {
+    /// Counts the operation about to be made.
+    fn next(&mut self) {
+        self.0 += 1;
+        if let Some(hook) = STEP_HOOK.get() {
+            hook(self.0);
+        }
+    }
+}
+
 /// Removes from `dir` and its set sub-folders what interrupted runs leave: staging folders
-/// (`.medial-staging-<pid>`) and the temporary files of the tool (`.medial-<pid>-…`: those of
-/// atomic writes, [`medial_io::atomic::temp_owner`], and the unfinished `log.csv`,
-/// [`crate::progress::part_name`]) whose process no longer runs. Only regular files and
-/// folders of the folder itself are removed (a symbolic link is never followed), and no
-/// other name: a user's `*.part` or `.*.tmp` file stays. Refuses (`Busy`), before removing
-/// anything, when another running process owns a staging folder there: its unfinished files
-/// are its own.
+/// (`.medial-staging-<pid>`) and the temporary files and links of the tool (`.medial-<pid>-…`:
+/// those of atomic writes, [`medial_io::atomic::temp_owner`], of a commit's links, and the
+/// unfinished `log.csv`, [`crate::progress::part_name`]) whose process no longer runs; in
+/// `DIR/.medial-sets`, the temporary links only. Only regular files, links and folders of the
+/// folder itself are removed (a symbolic link is never followed), and no other name: a user's
+/// `*.part` or `.*.tmp` file stays. Refuses (`Busy`), before removing anything, when another
+/// running process owns a staging folder there: its unfinished files are its own.
 pub fn clean(dir: &Path) -> Result<(), CliError> {
     let folders = std::iter::once(dir.to_path_buf()).chain(
         SUBFOLDERS
             .iter()
+            .chain(&[SETS])
             .map(|s| dir.join(s))
             .filter(|sub| std::fs::symlink_metadata(sub).is_ok_and(|m| m.is_dir())),
     );
@@ -159,14 +258,15 @@ pub fn clean(dir: &Path) -> Result<(), CliError> {
             ))
         })
         .collect();
-    let staging = |name: &str, kind: &std::fs::FileType| {
+    let staging = |name: &str, path: &Path, kind: &std::fs::FileType| {
         kind.is_dir()
+            && path.parent() == Some(dir)
             && name
                 .strip_prefix(STAGING_PREFIX)
                 .is_some_and(|pid| pid.parse::<u32>().is_ok())
     };
-    for (name, _, kind) in &entries {
-        if staging(name, kind) {
+    for (name, path, kind) in &entries {
+        if staging(name, path, kind) {
             if let Some(pid) = writer_running(&name[STAGING_PREFIX.len()..]) {
                 return Err(CliError::Busy {
                     dir: dir.into(),
@@ -176,9 +276,9 @@ pub fn clean(dir: &Path) -> Result<(), CliError> {
         }
     }
     for (name, path, kind) in &entries {
-        if staging(name, kind) {
+        if staging(name, path, kind) {
             std::fs::remove_dir_all(path).map_err(|e| CliError::io(path, e))?;
-        } else if kind.is_file() {
+        } else if kind.is_file() || kind.is_symlink() {
             let owner = medial_io::atomic::temp_owner(name);
             if owner.is_some_and(|pid| writer_running(&pid.to_string()).is_none()) {
                 remove_if_present(path)?;
@@ -202,18 +302,17 @@ fn canonical(dir: &Path) -> Result<PathBuf, CliError> {
     std::fs::canonicalize(dir).map_err(|e| CliError::io(dir, e))
 }
 
-/// The path the set's file `relative` moves to: in `dir` (canonical `root`), its folders
-/// created, and refused with one line when it would leave the folder (a `..`, a root, or a
-/// folder on its way that is a link to elsewhere) or when something other than a regular file
-/// is there (a folder, a link, a device, a FIFO). The path returned has its folders resolved,
-/// so the rename cannot follow a link.
-fn destination(root: &Path, dir: &Path, relative: &str) -> Result<PathBuf, CliError> {
+/// Checks the path of the set's file `relative` in `dir` (canonical `root`), its folders
+/// created: refused with one line when it would leave the folder (a `..`, a root, or a folder
+/// on its way that is a link), names the tool's own files (`.medial-…`), or holds something
+/// else than a regular file or the tool's own link (a folder, another link, a device, a FIFO).
+fn check_destination(root: &Path, dir: &Path, relative: &str) -> Result<(), CliError> {
     let path = dir.join(relative);
     let refuse = |what: &str| CliError::io(&path, std::io::Error::other(what.to_string()));
     if !is_relative_inside(relative) {
         return Err(refuse("not a path inside the output folder"));
     }
-    let (Some(parent), Some(name)) = (path.parent(), path.file_name()) else {
+    let Some(parent) = path.parent() else {
         return Err(refuse("not a path inside the output folder"));
     };
     create_dir(parent)?;
@@ -225,44 +324,217 @@ fn destination(root: &Path, dir: &Path, relative: &str) -> Result<PathBuf, CliEr
             dir.display()
         )));
     }
-    let resolved = parent.join(name);
-    match std::fs::symlink_metadata(&resolved) {
-        Ok(meta) if !meta.is_file() => Err(refuse(
+    if !folder_is_real(root, relative) {
+        return Err(refuse(&format!(
+            "its folder is a symbolic link inside the output folder {}: refused to write there",
+            dir.display()
+        )));
+    }
+    match std::fs::symlink_metadata(root.join(relative)) {
+        Ok(meta) if !meta.is_file() && !is_own_link(root, relative) => Err(refuse(
             "exists and is not a regular file (a folder, a symbolic link, a device or a FIFO): \
              refused to replace it; move it away or give another output folder",
         )),
         Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(CliError::io(&path, e)),
-        _ => Ok(resolved),
+        _ => Ok(()),
     }
 }
 
-/// Removes the file `relative` of an earlier set from `dir` (canonical `root`) when it is the
-/// tool's to remove, as proven by where it is: a regular file (not a link, which is never
-/// followed) whose folder, links resolved, is inside the output folder. Anything else is left
-/// where it is.
-fn remove_own(root: &Path, dir: &Path, relative: &str) -> Result<(), CliError> {
-    if !is_relative_inside(relative) {
-        return Ok(());
+/// `DIR/.medial-sets` (canonical `root`), created: a folder, not a link.
+fn sets_folder(root: &Path, dir: &Path) -> Result<PathBuf, CliError> {
+    let sets = root.join(SETS);
+    create_dir(&sets)?;
+    match std::fs::symlink_metadata(&sets) {
+        Ok(meta) if meta.is_dir() => Ok(sets),
+        _ => Err(CliError::io(
+            &dir.join(SETS),
+            std::io::Error::other("is not a folder (a symbolic link?): refused to write there"),
+        )),
     }
-    let path = dir.join(relative);
-    let (Some(parent), Some(name)) = (path.parent(), path.file_name()) else {
-        return Ok(());
-    };
-    let Ok(parent) = std::fs::canonicalize(parent) else {
-        return Ok(());
-    };
-    let resolved = parent.join(name);
-    let regular = std::fs::symlink_metadata(&resolved).is_ok_and(|m| m.is_file());
-    if parent.starts_with(root) && regular {
-        remove_if_present(&resolved)?;
-    } else if regular || std::fs::symlink_metadata(&resolved).is_ok() {
-        tracing::warn!(
-            "{}: listed by the earlier set but not a regular file inside the output folder: \
-             left as it is",
-            path.display()
-        );
+}
+
+/// The generation `DIR/.medial-sets/current` leads to, when it is a link to a folder there.
+fn current_generation(sets: &Path) -> Option<u64> {
+    let text = std::fs::read_link(sets.join(CURRENT)).ok()?;
+    let n = generation_number(text.to_str()?)?;
+    let is_dir = std::fs::symlink_metadata(sets.join(text)).is_ok_and(|m| m.is_dir());
+    is_dir.then_some(n)
+}
+
+/// The number of a generation folder's name (digits only).
+fn generation_number(name: &str) -> Option<u64> {
+    (!name.is_empty() && name.bytes().all(|b| b.is_ascii_digit()))
+        .then(|| name.parse().ok())
+        .flatten()
+}
+
+/// The generation folders in `sets` (folders, not links, named by digits).
+fn generations(sets: &Path) -> Vec<u64> {
+    let entries = std::fs::read_dir(sets).into_iter().flatten().flatten();
+    entries
+        .filter(|e| e.file_type().is_ok_and(|k| k.is_dir()))
+        .filter_map(|e| generation_number(e.file_name().to_str()?))
+        .collect()
+}
+
+/// A number above every generation's in `sets` (and above the current one's).
+fn next_generation(sets: &Path) -> u64 {
+    let highest = generations(sets)
+        .into_iter()
+        .chain(current_generation(sets))
+        .max();
+    highest.map_or(1, |n| n + 1)
+}
+
+/// Points `DIR/.medial-sets/current` at `generation`: a new link renamed over it (atomic).
+fn switch(sets: &Path, generation: u64, steps: &mut Steps) -> Result<(), CliError> {
+    let temp = sets.join(format!(
+        "{}{CURRENT}-link.tmp",
+        medial_io::atomic::temp_prefix()
+    ));
+    replace_by_link(&temp, &generation.to_string(), &sets.join(CURRENT), steps)?;
+    sync_dir(sets);
+    Ok(())
+}
+
+/// The text of the link `DIR/<relative>`: into the current generation, relative to its folder.
+fn link_text(relative: &str) -> String {
+    let depth = relative.matches('/').count();
+    format!("{}{SETS}/{CURRENT}/{relative}", "../".repeat(depth))
+}
+
+/// Replaces `DIR/<relative>` (canonical `root`; its folders real) by its link
+/// ([`link_text`]), in one rename.
+fn make_link(root: &Path, relative: &str, steps: &mut Steps) -> Result<(), CliError> {
+    let path = root.join(relative);
+    let name = path.file_name().unwrap_or_default().to_string_lossy();
+    let temp = path.with_file_name(format!(
+        "{}{}-link.tmp",
+        medial_io::atomic::temp_prefix(),
+        name.replace('.', "_")
+    ));
+    replace_by_link(&temp, &link_text(relative), &path, steps)
+}
+
+/// Makes the link `temp` with `text` and renames it to `path`.
+fn replace_by_link(
+    temp: &Path,
+    text: &str,
+    path: &Path,
+    steps: &mut Steps,
+) -> Result<(), CliError> {
+    if std::fs::symlink_metadata(temp).is_ok() {
+        steps.next();
+        remove_if_present(temp)?;
+    }
+    steps.next();
+    symlink(text, temp).map_err(|e| CliError::io(temp, e))?;
+    steps.next();
+    std::fs::rename(temp, path).map_err(|e| CliError::io(path, e))
+}
+
+#[cfg(unix)]
+fn symlink(text: &str, path: &Path) -> std::io::Result<()> {
+    std::os::unix::fs::symlink(text, path)
+}
+
+#[cfg(not(unix))]
+fn symlink(_: &str, _: &Path) -> std::io::Result<()> {
+    Err(std::io::Error::other(
+        "result folders need symbolic links (Unix)",
+    ))
+}
+
+/// Puts the regular file `from` into a generation folder as `to`: a hard link (a copy where
+/// the file system has none), replacing what is there.
+fn adopt_file(from: &Path, to: &Path, steps: &mut Steps) -> Result<(), CliError> {
+    if let Some(parent) = to.parent().filter(|p| !p.is_dir()) {
+        steps.next();
+        create_dir(parent)?;
+    }
+    if std::fs::symlink_metadata(to).is_ok() {
+        steps.next();
+        remove_if_present(to)?;
+    }
+    steps.next();
+    if std::fs::hard_link(from, to).is_err() {
+        std::fs::copy(from, to).map_err(|e| CliError::io(to, e))?;
+        let copy = std::fs::File::open(to).and_then(|f| f.sync_all());
+        copy.map_err(|e| CliError::io(to, e))?;
     }
     Ok(())
+}
+
+/// Removes the folder `path` (a generation of the tool's) file by file, links not followed.
+fn remove_tree(path: &Path, steps: &mut Steps) -> Result<(), CliError> {
+    let entries = std::fs::read_dir(path).map_err(|e| CliError::io(path, e))?;
+    for entry in entries {
+        let entry = entry.map_err(|e| CliError::io(path, e))?;
+        let kind = entry
+            .file_type()
+            .map_err(|e| CliError::io(&entry.path(), e))?;
+        if kind.is_dir() {
+            remove_tree(&entry.path(), steps)?;
+        } else {
+            steps.next();
+            remove_if_present(&entry.path())?;
+        }
+    }
+    steps.next();
+    std::fs::remove_dir(path).map_err(|e| CliError::io(path, e))
+}
+
+/// Whether the folders on the way to `DIR/<relative>` (canonical `root`) are folders of the
+/// result folder itself, no link among them.
+fn folder_is_real(root: &Path, relative: &str) -> bool {
+    let path = root.join(relative);
+    path.parent()
+        .and_then(|parent| std::fs::canonicalize(parent).ok().map(|c| c == parent))
+        .unwrap_or(false)
+}
+
+/// A path of the set's kind: inside the folder by its text and not in the tool's own
+/// namespace (`.medial-…`).
+fn is_set_path(relative: &str) -> bool {
+    is_relative_inside(relative)
+        && Path::new(relative)
+            .components()
+            .all(|c| !c.as_os_str().to_string_lossy().starts_with(TOOL_NAMESPACE))
+}
+
+/// Whether `DIR/<relative>` is a regular file inside the output folder (by place: its folders
+/// real, no link on the way), not of the tool's namespace.
+fn is_plain_file(root: &Path, relative: &str) -> bool {
+    is_set_path(relative)
+        && folder_is_real(root, relative)
+        && std::fs::symlink_metadata(root.join(relative)).is_ok_and(|m| m.is_file())
+}
+
+/// Whether `DIR/<relative>` is the tool's own link: in a real folder of the output folder, its
+/// text exactly [`link_text`].
+fn is_own_link(root: &Path, relative: &str) -> bool {
+    is_set_path(relative)
+        && folder_is_real(root, relative)
+        && std::fs::read_link(root.join(relative))
+            .is_ok_and(|text| text.as_os_str() == link_text(relative).as_str())
+}
+
+/// The relative paths of the links in `DIR` and its set sub-folders (canonical `root`).
+fn links_in(root: &Path) -> Vec<String> {
+    let mut links = Vec::new();
+    for prefix in std::iter::once("").chain(SUBFOLDERS) {
+        let folder = root.join(prefix);
+        for entry in std::fs::read_dir(&folder).into_iter().flatten().flatten() {
+            if entry.file_type().is_ok_and(|k| k.is_symlink()) {
+                let name = entry.file_name().to_string_lossy().into_owned();
+                links.push(match prefix {
+                    "" => name,
+                    sub => format!("{sub}/{name}"),
+                });
+            }
+        }
+    }
+    links
 }
 
 /// The `files` a marker lists (empty when it is missing or lists none).
@@ -279,7 +551,7 @@ fn listed_files(marker: &Path) -> Vec<String> {
 }
 
 /// A relative path that stays inside the result folder by its text (no root, no `..`; the
-/// folders on its way are checked apart, [`destination`] and [`remove_own`]).
+/// folders on its way are checked apart, [`folder_is_real`]).
 fn is_relative_inside(relative: &str) -> bool {
     Path::new(relative)
         .components()
@@ -309,10 +581,14 @@ fn sync_dir(dir: &Path) {
 mod tests {
     use super::*;
 
+    /// The entries of `dir` and `dir/flow`, but the generations' folder.
     fn names(dir: &Path) -> Vec<String> {
         let mut all = Vec::new();
         for folder in [dir.to_path_buf(), dir.join("flow")] {
             for e in std::fs::read_dir(&folder).into_iter().flatten().flatten() {
+                if e.file_name() == SETS {
+                    continue;
+                }
                 let rel = e
                     .path()
                     .strip_prefix(dir)
@@ -355,6 +631,75 @@ mod tests {
         assert_eq!(std::fs::read_to_string(d.join("a.txt")).unwrap(), "2");
         let summary = std::fs::read_to_string(d.join("summary.json")).unwrap();
         assert_eq!(summary, r#"{"files":["a.txt","flow/t0.vtk"]}"#);
+        // The layout: links into the one generation left.
+        let sets = d.join(SETS);
+        assert_eq!(generations(&sets), [current_generation(&sets).unwrap()]);
+        for (file, text) in [
+            ("a.txt", ".medial-sets/current/a.txt"),
+            ("flow/t0.vtk", "../.medial-sets/current/flow/t0.vtk"),
+            ("summary.json", ".medial-sets/current/summary.json"),
+        ] {
+            assert_eq!(std::fs::read_link(d.join(file)).unwrap(), Path::new(text));
+        }
+        assert!(std::fs::symlink_metadata(d.join("mine.txt"))
+            .unwrap()
+            .is_file());
+    }
+
+    /// A folder of the layout before generations (regular files), and regular files at the
+    /// set's paths, are taken over: the new set replaces them, the earlier one's stale files go.
+    #[test]
+    fn a_set_of_regular_files_is_replaced_and_its_stale_files_go() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        std::fs::create_dir_all(d.join("flow")).unwrap();
+        for (file, text) in [("a.txt", "1"), ("flow/t0.vtk", "1"), ("flow/t1.vtk", "1")] {
+            std::fs::write(d.join(file), text).unwrap();
+        }
+        std::fs::write(
+            d.join("summary.json"),
+            r#"{"files":["a.txt","flow/t0.vtk","flow/t1.vtk"]}"#,
+        )
+        .unwrap();
+        std::fs::write(d.join("checkpoint.bin"), "periodic").unwrap();
+        let mut set = ResultSet::begin(d).unwrap();
+        std::fs::write(set.file("a.txt").unwrap(), "2").unwrap();
+        std::fs::write(set.file("b.txt").unwrap(), "2").unwrap();
+        set.retire("checkpoint.bin");
+        set.commit("summary.json", |path, files| {
+            let text = serde_json::json!({ "files": files }).to_string();
+            std::fs::write(path, text).map_err(|e| CliError::io(path, e))
+        })
+        .unwrap();
+        assert_eq!(names(d), ["a.txt", "b.txt", "flow", "summary.json"]);
+        assert_eq!(std::fs::read_to_string(d.join("a.txt")).unwrap(), "2");
+        assert!(std::fs::symlink_metadata(d.join("a.txt"))
+            .unwrap()
+            .is_symlink());
+        assert_eq!(generations(&d.join(SETS)).len(), 1);
+    }
+
+    /// A link at a path of the set that is not the tool's own is refused, and stays.
+    #[test]
+    fn another_link_at_a_path_of_the_set_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        write_set(d, &[("a.txt", "1")]);
+        std::fs::remove_file(d.join("a.txt")).unwrap();
+        std::os::unix::fs::symlink("summary.json", d.join("a.txt")).unwrap();
+        let mut set = ResultSet::begin(d).unwrap();
+        std::fs::write(set.file("a.txt").unwrap(), "2").unwrap();
+        let error = set
+            .commit("summary.json", |path, _| {
+                std::fs::write(path, "{}").map_err(|e| CliError::io(path, e))
+            })
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains("a.txt") && error.contains("not a regular file"));
+        assert_eq!(
+            std::fs::read_link(d.join("a.txt")).unwrap(),
+            Path::new("summary.json")
+        );
     }
 
     #[test]

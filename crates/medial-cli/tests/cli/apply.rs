@@ -324,12 +324,12 @@ fn the_atom_table_agrees_with_the_medial_vtk() {
     );
 }
 
-/// A copy of the fit folder's files (not its sub-folders) in `dir`.
+/// A copy of the fit folder's files (not its sub-folders; its links followed) in `dir`.
 fn copy_fit(dir: &Path) -> PathBuf {
     let copy = dir.join("fit");
     std::fs::create_dir_all(&copy).unwrap();
     for entry in std::fs::read_dir(fit_dir()).unwrap().flatten() {
-        if entry.file_type().unwrap().is_file() {
+        if entry.path().is_file() {
             std::fs::copy(entry.path(), copy.join(entry.file_name())).unwrap();
         }
     }

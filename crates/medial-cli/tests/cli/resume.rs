@@ -148,13 +148,17 @@ fn stop_at(config: &Path, out: &Path, at: usize, signal: &str, args: &[&str]) ->
     signal_when(spawn(&all), signal, || rows(out) >= at)
 }
 
-/// Every file under `dir`, as sorted relative paths.
+/// Every file under `dir` (links followed, the generations' folder `.medial-sets` left out),
+/// as sorted relative paths.
 fn files(dir: &Path) -> Vec<String> {
     let mut all = Vec::new();
     let mut folders = vec![dir.to_path_buf()];
     while let Some(folder) = folders.pop() {
         for entry in std::fs::read_dir(&folder).unwrap() {
             let path = entry.unwrap().path();
+            if path.file_name().is_some_and(|n| n == ".medial-sets") {
+                continue;
+            }
             if path.is_dir() {
                 folders.push(path);
             } else {
@@ -188,6 +192,16 @@ fn complete_set(dir: &Path) -> Value {
         assert!(listed.iter().any(|f| f == view), "{view} not listed");
     }
     assert_eq!(files(dir), listed, "{}", dir.display());
+    // Of one generation, which the set's links lead into (decision 0300).
+    let sets = std::fs::read_dir(dir.join(".medial-sets")).unwrap().count();
+    assert_eq!(sets, 2, "one generation and `current`");
+    for file in &listed {
+        let link = std::fs::read_link(dir.join(file)).unwrap();
+        assert!(
+            link.to_string_lossy().contains(".medial-sets/current/"),
+            "{link:?}"
+        );
+    }
     summary
 }
 
