@@ -178,14 +178,17 @@ impl ResultSet {
             .chain(links_in(&root))
             .filter(|relative| !all.contains(relative))
             .collect();
+        // The new set is shown whatever happens now: what cannot be removed is only warned of
+        // (the next commit removes it).
+        let warn = |e: CliError| tracing::warn!("{e}: left for the next fit to remove");
         for relative in &stale {
             if is_own_link(&root, relative) {
                 steps.next();
-                remove_if_present(&root.join(relative))?;
+                remove_if_present(&root.join(relative)).unwrap_or_else(warn);
             }
         }
         for earlier in generations(&sets).into_iter().filter(|&n| n != generation) {
-            remove_tree(&sets.join(earlier.to_string()), &mut steps)?;
+            remove_tree(&sets.join(earlier.to_string()), &mut steps).unwrap_or_else(warn);
         }
         for synced in [root.join("flow"), root.clone(), sets] {
             sync_dir(&synced);
@@ -361,11 +364,11 @@ fn current_generation(sets: &Path) -> Option<u64> {
     is_dir.then_some(n)
 }
 
-/// The number of a generation folder's name (digits only).
+/// The number of a generation folder's name (a number as the tool writes it: digits, no
+/// leading zero).
 fn generation_number(name: &str) -> Option<u64> {
-    (!name.is_empty() && name.bytes().all(|b| b.is_ascii_digit()))
-        .then(|| name.parse().ok())
-        .flatten()
+    let n: u64 = name.parse().ok()?;
+    (n.to_string() == name).then_some(n)
 }
 
 /// The generation folders in `sets` (folders, not links, named by digits).
@@ -700,6 +703,23 @@ mod tests {
             std::fs::read_link(d.join("a.txt")).unwrap(),
             Path::new("summary.json")
         );
+    }
+
+    #[test]
+    fn generations_are_named_by_numbers_as_the_tool_writes_them() {
+        assert_eq!(generation_number("7"), Some(7));
+        assert_eq!(generation_number("10"), Some(10));
+        for name in [
+            "",
+            "007",
+            "+7",
+            "-1",
+            "7a",
+            "current",
+            "99999999999999999999999",
+        ] {
+            assert_eq!(generation_number(name), None, "{name}");
+        }
     }
 
     #[test]
