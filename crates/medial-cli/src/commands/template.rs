@@ -54,7 +54,7 @@ pub struct TemplateArgs {
     /// folder: the image the template was fitted to.
     #[arg(long, value_name = "DIR")]
     pub work: Option<PathBuf>,
-    /// Skip the Dice fit to the shape (step 4): the projected inflation of the sheet.
+    /// Skip the Dice fit to the shape (step 6 of docs/template.md): the projected inflation of the sheet.
     #[arg(long)]
     pub no_fit: bool,
     /// Write binary legacy VTK instead of ASCII.
