@@ -32,7 +32,7 @@ use crate::mesh::topology::{check_closed_oriented_manifold, check_outward};
 use crate::mesh::Bounds;
 use crate::model::template::MAX_SPOKES;
 use crate::model::{MedialTemplate, Model, SpokeMetrics, TemplateSummary};
-use crate::{Error, Result, TriMesh};
+use crate::{Error, Result, TriMesh, Vec3};
 use serde::Serialize;
 
 /// Atoms of a template when neither a count nor a spacing is given.
@@ -269,7 +269,16 @@ pub fn template_of_shape(
     shape.bounds()?;
     let (mask, voxel, wanted) = fine_mask(shape, options.voxel, memory)?;
     let found = sheet_of_mask(&mask, options.sampling)?;
-    let initial = inflated(&found.sheet)?;
+    let initial = inflated(&found.sheet).map_err(|e| match Fold::of(&found.sheet) {
+        Some(fold) => Error::InvalidTemplate(format!(
+            "the medial sheet folds by up to {:.0}° between neighbouring triangles at {} \
+             edges, the sharpest near ({:.1}, {:.1}, {:.1}) mm: the shape probably branches \
+             there (sheets meeting at a seam that was not found; {} seams found), and a folded \
+             sheet cannot be inflated ({e})",
+            fold.max_deg, fold.edges, fold.at.x, fold.at.y, fold.at.z, found.branching.seams
+        )),
+        None => e,
+    })?;
     let dice_before_fit = voxel_dice(&initial.boundary_mesh()?, &mask)?;
     let (fitted, fit_stopped_early) = if options.fit {
         fit_to_shape(&initial, &mask, memory)?
@@ -355,6 +364,66 @@ fn voxel_within(shape: &Shape, h: f64, memory: MemoryLimit) -> Result<f64> {
     Err(Error::InvalidParameter(format!(
         "no grid of the shape fits {cap:.0} voxels"
     )))
+}
+
+/// Neighbouring triangles of a lattice sheet whose normals are more than this apart, degrees,
+/// make a fold the lattice cannot follow: the medial sheet of a smooth wall turns little over
+/// one lattice spacing (a few of them span a ventricle), so such an edge is a crease where sheets
+/// branch and no seam was found. None of the shapes that build (the cup, t001, the anterior
+/// leaflet, the toy) has one; the biv-me heart, built as one sheet, has 37 (decision 0401).
+pub const SHEET_FOLD_DEG: f64 = 60.0;
+
+/// The folds of a sheet past [`SHEET_FOLD_DEG`]: how many interior edges (in exactly two
+/// triangles; a seam's edges are in three), the largest angle, and the middle of its edge.
+struct Fold {
+    edges: usize,
+    max_deg: f64,
+    at: Vec3,
+}
+
+impl Fold {
+    /// The folds of `sheet`, none when no edge passes the bound. Triangles of one edge are
+    /// compared as consistently oriented (the normal of one flipped when both run the edge the
+    /// same way).
+    fn of(sheet: &MedialSheet) -> Option<Self> {
+        let (p, tris) = (sheet.points(), sheet.triangles());
+        let normal = |t: &[usize; 3]| (p[t[1]] - p[t[0]]).cross(&(p[t[2]] - p[t[0]]));
+        let mut by_edge: std::collections::HashMap<(usize, usize), Vec<(usize, bool)>> =
+            std::collections::HashMap::new();
+        for (f, t) in tris.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (t[k], t[(k + 1) % 3]);
+                by_edge
+                    .entry((a.min(b), a.max(b)))
+                    .or_default()
+                    .push((f, a < b));
+            }
+        }
+        let (mut count, mut worst) = (0, None::<(f64, Vec3)>);
+        let mut edges: Vec<_> = by_edge.into_iter().collect();
+        edges.sort_unstable_by_key(|(e, _)| *e);
+        for ((a, b), faces) in edges {
+            let [(f, f_up), (g, g_up)] = faces[..] else {
+                continue;
+            };
+            let (m, n) = (normal(&tris[f]), normal(&tris[g]));
+            let sign = if f_up == g_up { -1.0 } else { 1.0 };
+            let cos = sign * m.dot(&n) / (m.norm() * n.norm());
+            let angle = cos.clamp(-1.0, 1.0).acos().to_degrees();
+            if angle.is_nan() || angle <= SHEET_FOLD_DEG {
+                continue;
+            }
+            count += 1;
+            if worst.map_or(true, |(w, _)| angle > w) {
+                worst = Some((angle, (p[a] + p[b]) / 2.0));
+            }
+        }
+        worst.map(|(max_deg, at)| Self {
+            edges: count,
+            max_deg,
+            at,
+        })
+    }
 }
 
 /// The sheet Loop-subdivided once, inflated and projected onto its constraints.
@@ -456,6 +525,32 @@ fn figures_of(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A strip of four triangles along x, its far half turned about the y axis by `turn`
+    /// degrees (a crease along x = 1), with either orientation of one of its triangles.
+    fn creased(turn: f64) -> MedialSheet {
+        let (c, s) = (turn.to_radians().cos(), turn.to_radians().sin());
+        let points = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(1.0 + c, 0.0, s),
+            Vec3::new(1.0 + c, 1.0, s),
+        ];
+        let triangles = vec![[0, 2, 1], [1, 2, 3], [2, 4, 3], [3, 4, 5]];
+        MedialSheet::new(points, triangles, vec![0.1; 6]).unwrap()
+    }
+
+    #[test]
+    fn a_crease_past_the_fold_bound_is_found_and_a_gentle_bend_is_not() {
+        assert!(Fold::of(&creased(0.0)).is_none());
+        assert!(Fold::of(&creased(50.0)).is_none());
+        let fold = Fold::of(&creased(120.0)).expect("a fold of 120°");
+        assert_eq!(fold.edges, 1);
+        assert!((fold.max_deg - 120.0).abs() < 1e-9, "{}", fold.max_deg);
+        assert!((fold.at - Vec3::new(1.0, 0.5, 0.0)).norm() < 1e-12);
+    }
 
     fn figures(sound: [bool; 3], angle: f64, mismatch: f64) -> TemplateFigures {
         TemplateFigures {
