@@ -2,7 +2,7 @@
 //! landmarks (boundary and medial points, in correspondence) aligned by generalised Procrustes
 //! analysis and averaged, the mean placed on the round's template (rigidly, least squares), then
 //! projected onto the medial constraints
-//! ([`medial_core::construction::project`]) so that they hold within its tolerances. The
+//! ([`medial_core::construction::project()`]) so that they hold within its tolerances. The
 //! change of the round is the root-mean-square move of the landmarks from the round's template
 //! to the new one; rounds (each fitting the cohort again from the new template) repeat until it
 //! is small.
