@@ -159,27 +159,11 @@ fn chain(segments: &[[Crossing; 2]]) -> Vec<Vec<Crossing>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testing::meshes;
 
-    /// The octahedron of corners ±e_x, ±e_y, ±e_z, outward.
+    /// The octahedron of corners ±e_x, ±e_y, ±e_z, outward ([`meshes::octahedron`]).
     fn octahedron() -> TriMesh {
-        let p = vec![
-            Vec3::x(),
-            -Vec3::x(),
-            Vec3::y(),
-            -Vec3::y(),
-            Vec3::z(),
-            -Vec3::z(),
-        ];
-        let t = vec![
-            [0, 2, 4],
-            [2, 1, 4],
-            [1, 3, 4],
-            [3, 0, 4],
-            [2, 0, 5],
-            [1, 2, 5],
-            [3, 1, 5],
-            [0, 3, 5],
-        ];
+        let (p, t) = meshes::octahedron();
         TriMesh::new(p, t).unwrap()
     }
 
