@@ -606,8 +606,9 @@ impl Fit<'_> {
         for view in crate::report::write(set.staging(), &self.options.out)? {
             set.include(&view);
         }
-        set.commit("summary.json", |path, files| {
-            summary.files = files;
+        set.commit("summary.json", |path, listing| {
+            summary.files = listing.files;
+            summary.sha256 = listing.sha256;
             write_json(path, &summary)
         })?;
         match failure {
@@ -672,6 +673,7 @@ impl Fit<'_> {
             alignment: self.alignment.to_vec(),
             retries: self.retries.to_vec(),
             files: Vec::new(),
+            sha256: Default::default(),
         }
     }
 }

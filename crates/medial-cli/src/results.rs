@@ -101,22 +101,50 @@ impl ResultSet {
         self.files.iter().cloned().collect()
     }
 
+    /// Puts the file `relative` the result folder shows now (through its link, if it is one)
+    /// into the set unchanged: a hard link in the staging folder (a copy where the file system
+    /// has none). For a command that writes a set from the earlier one (`medial report`).
+    pub fn carry(&mut self, relative: &str) -> Result<(), CliError> {
+        let root = canonical(&self.dir)?;
+        if !is_plain_file(&root, relative) && !is_own_link(&root, relative) {
+            return Err(CliError::io(
+                &self.dir.join(relative),
+                std::io::Error::other(
+                    "listed by the set but not a file of the tool inside the output folder",
+                ),
+            ));
+        }
+        let from = canonical(&root.join(relative))?;
+        let to = self.file(relative)?;
+        adopt_file(&from, &to, &mut Steps(0))
+    }
+
     /// Commits the set into the result folder (the module's layout and steps).
     /// `write_marker` writes the marker file `marker` at the staging path it is given, from the
-    /// sorted list of the set's other files. Refused with one line, before anything changes,
-    /// when a destination leads out of the folder or holds something else than a regular file
-    /// or the tool's own link.
+    /// set's other files and their SHA-256 ([`Listing`]). Refused with one line, before
+    /// anything changes, when a destination leads out of the folder or holds something else
+    /// than a regular file or the tool's own link. On a file system without symbolic links the
+    /// set is moved in file by file instead, with a warning ([`ResultSet::commit_plain`]).
     pub fn commit(
         mut self,
         marker: &str,
-        write_marker: impl FnOnce(&Path, Vec<String>) -> Result<(), CliError>,
+        write_marker: impl FnOnce(&Path, Listing) -> Result<(), CliError>,
     ) -> Result<(), CliError> {
-        let files = self.files();
-        write_marker(&self.file(marker)?, files)?;
+        let listing = Listing::of(&self.staging, self.files())?;
+        write_marker(&self.file(marker)?, listing)?;
         let all = self.files.clone();
         let root = canonical(&self.dir)?;
         for relative in &all {
             check_destination(&root, &self.dir, relative)?;
+        }
+        if !makes_links(&self.staging) {
+            tracing::warn!(
+                "{}: the file system makes no symbolic links: the results are moved in file by \
+                 file, {marker} last (a crash while they move can leave a mix of the earlier \
+                 and the new files; {marker} then lists the earlier set's)",
+                self.dir.display()
+            );
+            return self.commit_plain(&root, marker);
         }
         let sets = sets_folder(&root, &self.dir)?;
         let earlier = listed_files(&root.join(marker));
@@ -195,6 +223,123 @@ impl ResultSet {
         }
         Ok(())
     }
+}
+
+impl ResultSet {
+    /// The commit where no symbolic link can be made: the earlier marker removed first (so a
+    /// folder whose marker lists a set never shows a mix), each file of the set renamed over
+    /// its path, the marker last, then the earlier set's files the new one lacks removed (only
+    /// the tool's regular files inside the folder, proven by place).
+    fn commit_plain(self, root: &Path, marker: &str) -> Result<(), CliError> {
+        let earlier = listed_files(&root.join(marker));
+        if is_plain_file(root, marker) {
+            remove_if_present(&root.join(marker))?;
+        }
+        sync_dir(root);
+        let others = self.files.iter().filter(|r| r.as_str() != marker);
+        for relative in others.chain(std::iter::once(&marker.to_string())) {
+            let to = root.join(relative);
+            if let Some(parent) = to.parent() {
+                create_dir(parent)?;
+            }
+            std::fs::rename(self.staging.join(relative), &to).map_err(|e| CliError::io(&to, e))?;
+        }
+        for synced in [root.join("flow"), root.to_path_buf()] {
+            sync_dir(&synced);
+        }
+        let stale = (earlier.iter().chain(&self.retired)).filter(|r| !self.files.contains(*r));
+        for relative in stale {
+            if is_plain_file(root, relative) {
+                remove_if_present(&root.join(relative))
+                    .unwrap_or_else(|e| tracing::warn!("{e}: left for the next fit to remove"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What a set's marker records of the set's other files.
+#[derive(Debug, Default, Deserialize)]
+pub struct Listing {
+    /// Their paths relative to the result folder, sorted.
+    #[serde(default)]
+    pub files: Vec<String>,
+    /// The SHA-256 of each (lowercase hex), by path: what [`verify`] checks.
+    #[serde(default)]
+    pub sha256: std::collections::BTreeMap<String, String>,
+}
+
+impl Listing {
+    /// The listing of `files`, at their relative paths in `folder`.
+    fn of(folder: &Path, files: Vec<String>) -> Result<Self, CliError> {
+        let sha256 = files
+            .iter()
+            .map(|relative| Ok((relative.clone(), sha256_hex(&folder.join(relative))?)))
+            .collect::<Result<_, CliError>>()?;
+        Ok(Self { files, sha256 })
+    }
+}
+
+/// The SHA-256 of the file at `path`, in lowercase hex.
+fn sha256_hex(path: &Path) -> Result<String, CliError> {
+    use sha2::Digest;
+    let mut file = std::fs::File::open(path).map_err(|e| CliError::io(path, e))?;
+    let mut hasher = sha2::Sha256::new();
+    std::io::copy(&mut file, &mut hasher).map_err(|e| CliError::io(path, e))?;
+    Ok(hasher
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect())
+}
+
+/// Checks the files of the set the folder `dir` shows against the SHA-256 its marker
+/// records. Refused with one line naming the first file that is missing or differs (damaged,
+/// or changed after the set was written); a marker that records no digests (a set of an
+/// earlier version) is taken as it is; the files `skip` names are not checked (those the
+/// caller makes again). The marker itself is the caller's to read.
+pub fn verify(dir: &Path, marker: &str, skip: impl Fn(&str) -> bool) -> Result<(), CliError> {
+    let path = dir.join(marker);
+    let Ok(bytes) = std::fs::read(&path) else {
+        return Ok(());
+    };
+    let Ok(listing) = serde_json::from_slice::<Listing>(&bytes) else {
+        return Ok(());
+    };
+    for (relative, recorded) in listing.sha256.iter().filter(|(r, _)| !skip(r)) {
+        let file = dir.join(relative);
+        let refuse = |what: String| CliError::File(medial_io::Error::format(&file, what));
+        if !is_relative_inside(relative) {
+            return Err(refuse(format!(
+                "{marker} records a path outside the folder: refused"
+            )));
+        }
+        if !file.is_file() {
+            return Err(refuse(format!(
+                "listed by {} but missing: the set of results is not whole",
+                path.display()
+            )));
+        }
+        if &sha256_hex(&file)? != recorded {
+            return Err(refuse(format!(
+                "its bytes differ from the SHA-256 that {} records (damaged, or changed after \
+                 the results were written): refused",
+                path.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Whether a symbolic link can be made in `folder` (tried and removed).
+fn makes_links(folder: &Path) -> bool {
+    let probe = folder.join(format!(
+        "{}probe-link.tmp",
+        medial_io::atomic::temp_prefix()
+    ));
+    let made = symlink("probe", &probe).is_ok();
+    let _ = std::fs::remove_file(&probe);
+    made
 }
 
 impl Drop for ResultSet {
@@ -541,15 +686,10 @@ fn links_in(root: &Path) -> Vec<String> {
 }
 
 /// The `files` a marker lists (empty when it is missing or lists none).
-fn listed_files(marker: &Path) -> Vec<String> {
-    #[derive(Deserialize)]
-    struct Listed {
-        #[serde(default)]
-        files: Vec<String>,
-    }
+pub fn listed_files(marker: &Path) -> Vec<String> {
     std::fs::read(marker)
         .ok()
-        .and_then(|bytes| serde_json::from_slice::<Listed>(&bytes).ok())
+        .and_then(|bytes| serde_json::from_slice::<Listing>(&bytes).ok())
         .map_or_else(Vec::new, |l| l.files)
 }
 
@@ -610,8 +750,8 @@ mod tests {
         for (name, text) in files {
             std::fs::write(set.file(name).unwrap(), text).unwrap();
         }
-        set.commit("summary.json", |path, files| {
-            let text = serde_json::json!({ "files": files }).to_string();
+        set.commit("summary.json", |path, listing| {
+            let text = serde_json::json!({ "files": listing.files }).to_string();
             std::fs::write(path, text).map_err(|e| CliError::io(path, e))
         })
         .unwrap();
@@ -669,8 +809,8 @@ mod tests {
         std::fs::write(set.file("a.txt").unwrap(), "2").unwrap();
         std::fs::write(set.file("b.txt").unwrap(), "2").unwrap();
         set.retire("checkpoint.bin");
-        set.commit("summary.json", |path, files| {
-            let text = serde_json::json!({ "files": files }).to_string();
+        set.commit("summary.json", |path, listing| {
+            let text = serde_json::json!({ "files": listing.files }).to_string();
             std::fs::write(path, text).map_err(|e| CliError::io(path, e))
         })
         .unwrap();
@@ -822,5 +962,121 @@ mod tests {
             r#"{"files":["a.txt"]}"#,
             "the refused set changed the earlier one"
         );
+    }
+
+    /// Writes a set whose marker records the files' digests, through `commit` or, where `plain`,
+    /// the commit of a file system without symbolic links.
+    fn write_checked_set(dir: &Path, files: &[(&str, &str)], plain: bool) {
+        let mut set = ResultSet::begin(dir).unwrap();
+        for (name, text) in files {
+            std::fs::write(set.file(name).unwrap(), text).unwrap();
+        }
+        let marker = |path: &Path, listing: Listing| {
+            let text = serde_json::json!({ "files": listing.files, "sha256": listing.sha256 });
+            std::fs::write(path, text.to_string()).map_err(|e| CliError::io(path, e))
+        };
+        if plain {
+            let listing = Listing::of(&set.staging, set.files()).unwrap();
+            marker(&set.file("summary.json").unwrap(), listing).unwrap();
+            let root = canonical(dir).unwrap();
+            set.commit_plain(&root, "summary.json").unwrap();
+        } else {
+            set.commit("summary.json", marker).unwrap();
+        }
+    }
+
+    #[test]
+    fn a_damaged_or_missing_file_of_a_set_is_refused_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        write_checked_set(d, &[("a.txt", "1"), ("flow/t0.vtk", "vtk")], false);
+        verify(d, "summary.json", |_| false).unwrap();
+        // Written through its link: the generation's file changes.
+        std::fs::write(d.join("flow/t0.vtk"), "vtK").unwrap();
+        let e = verify(d, "summary.json", |_| false)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("t0.vtk") && e.contains("SHA-256"), "{e}");
+        std::fs::write(d.join("flow/t0.vtk"), "vtk").unwrap();
+        verify(d, "summary.json", |_| false).unwrap();
+        std::fs::remove_file(d.join(".medial-sets/current/a.txt")).unwrap();
+        let e = verify(d, "summary.json", |_| false)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("a.txt") && e.contains("missing"), "{e}");
+        // A marker of an earlier version (no digests) is taken as it is.
+        std::fs::write(d.join("old.json"), r#"{"files":["gone.txt"]}"#).unwrap();
+        verify(d, "old.json", |_| false).unwrap();
+    }
+
+    /// Without symbolic links the set is moved in file by file: the folder holds regular files
+    /// only, the earlier set's stale files go, a user's file stays, and a later commit with
+    /// links takes the folder over.
+    #[test]
+    fn a_set_is_moved_in_file_by_file_where_no_link_can_be_made() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        write_checked_set(
+            d,
+            &[("a.txt", "1"), ("b.txt", "1"), ("flow/t0.vtk", "1")],
+            true,
+        );
+        std::fs::write(d.join("mine.txt"), "not of a set").unwrap();
+        write_checked_set(d, &[("a.txt", "2"), ("c.txt", "2")], true);
+        assert_eq!(
+            names(d),
+            ["a.txt", "c.txt", "flow", "mine.txt", "summary.json"]
+        );
+        for name in ["a.txt", "c.txt", "summary.json"] {
+            let meta = std::fs::symlink_metadata(d.join(name)).unwrap();
+            assert!(meta.is_file(), "{name}");
+        }
+        assert!(!d.join(SETS).exists());
+        verify(d, "summary.json", |_| false).unwrap();
+        write_checked_set(d, &[("a.txt", "3")], false);
+        assert_eq!(names(d), ["a.txt", "flow", "mine.txt", "summary.json"]);
+        assert_eq!(std::fs::read_to_string(d.join("a.txt")).unwrap(), "3");
+        verify(d, "summary.json", |_| false).unwrap();
+    }
+
+    /// A set made from the one shown (`medial report`): the carried files keep their bytes,
+    /// the new one joins, and the earlier generation goes.
+    #[test]
+    fn files_carried_into_a_new_set_keep_their_bytes() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        write_checked_set(d, &[("a.txt", "1"), ("flow/t0.vtk", "vtk")], false);
+        let mut set = ResultSet::begin(d).unwrap();
+        for relative in listed_files(&d.join("summary.json")) {
+            set.carry(&relative).unwrap();
+        }
+        std::fs::write(set.file("report.html").unwrap(), "<html>").unwrap();
+        set.commit("summary.json", |path, listing| {
+            let text = serde_json::json!({ "files": listing.files, "sha256": listing.sha256 });
+            std::fs::write(path, text.to_string()).map_err(|e| CliError::io(path, e))
+        })
+        .unwrap();
+        assert_eq!(
+            names(d),
+            [
+                "a.txt",
+                "flow",
+                "flow/t0.vtk",
+                "report.html",
+                "summary.json"
+            ]
+        );
+        assert_eq!(
+            std::fs::read_to_string(d.join("flow/t0.vtk")).unwrap(),
+            "vtk"
+        );
+        assert_eq!(generations(&d.join(SETS)).len(), 1);
+        verify(d, "summary.json", |_| false).unwrap();
+        // Only the tool's files are carried.
+        std::fs::write(d.join("mine.txt"), "x").unwrap();
+        let mut set = ResultSet::begin(d).unwrap();
+        std::os::unix::fs::symlink("/etc/hostname", d.join("other")).unwrap();
+        assert!(set.carry("other").is_err());
+        set.carry("mine.txt").unwrap();
     }
 }

@@ -178,4 +178,7 @@ pub struct Summary {
     /// The other files of this set of results (paths relative to the folder, sorted): all in
     /// place once `summary.json` is ([`crate::results`]).
     pub files: Vec<String>,
+    /// The SHA-256 of each of [`Summary::files`] (lowercase hex), by path: commands that read
+    /// the set refuse a file that differs ([`crate::results::verify`]).
+    pub sha256: std::collections::BTreeMap<String, String>,
 }

@@ -138,8 +138,10 @@ pub fn run(args: &CheckArgs) -> Result<(), CliError> {
     )))
 }
 
-/// The `status` of the fit folder `dir`'s summary.json.
+/// The `status` of the fit folder `dir`'s summary.json, its files checked against their
+/// digests.
 fn fit_status(dir: &Path) -> Result<String, CliError> {
+    crate::results::verify(dir, "summary.json", |_| false)?;
     let path = dir.join("summary.json");
     let text = std::fs::read_to_string(&path).map_err(|e| CliError::io(&path, e))?;
     let summary: serde_json::Value = serde_json::from_str(&text)

@@ -28,6 +28,14 @@ use folder::{FitFolder, FlowKind};
 use medial_io::vtk::{write_series, SeriesFile};
 use std::path::Path;
 
+/// Whether the file `relative` of a fit folder is one of the views [`write`] makes.
+pub fn is_view(relative: &str) -> bool {
+    let series = |kind: FlowKind| relative == format!("flow/{}.vtk.series", kind.name());
+    matches!(relative, "flow.glb" | "report.html")
+        || series(FlowKind::Boundary)
+        || series(FlowKind::Medial)
+}
+
 /// Writes the series, `flow.glb` and `report.html` of the fit folder `dir` from its files and
 /// returns their paths relative to `dir` (`/`-separated), in the order written; the report
 /// names the fit by the folder `shown` (`dir`, or the result folder `dir` stages for).

@@ -129,9 +129,12 @@ fn summary_tables(summary: &Value) -> Markup {
     let Some(map) = summary.as_object() else {
         return html! {};
     };
+    // `files` and `sha256` describe the set, not the fit (and a report made in the staging
+    // folder is made before they are final).
+    let of_the_set = ["files", "sha256"];
     let objects: Vec<&String> = map
         .iter()
-        .filter(|(_, v)| v.is_object())
+        .filter(|(k, v)| v.is_object() && !of_the_set.contains(&k.as_str()))
         .map(|(k, _)| k)
         .collect();
     let stages = summary["stages"].as_array().cloned().unwrap_or_default();
@@ -148,9 +151,8 @@ fn summary_tables(summary: &Value) -> Markup {
     let skip: Vec<&str> = objects
         .iter()
         .map(|k| k.as_str())
-        // `files` lists the set, not a figure (and a report made in the staging folder is
-        // made before the list is final).
-        .chain(["stages", "status", "files", "alignment"])
+        .chain(["stages", "status", "alignment"])
+        .chain(of_the_set)
         .collect();
     html! {
         h2 { "Fit" }

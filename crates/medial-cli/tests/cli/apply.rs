@@ -3,7 +3,7 @@
 //! boundary, a label image pulled back with its warp read back against the point map, the
 //! per-atom table against the medial VTK, and the refusals.
 
-use crate::common::{f, medial, one_line_error, run_json, s, text};
+use crate::common::{f, medial, one_line_error, reseal, run_json, s, text};
 use medial_core::image::Volume;
 use medial_core::Vec3;
 use medial_io::nifti_volume::{read_nifti, read_nifti_file, write_nifti, NiftiType};
@@ -360,11 +360,14 @@ fn what_is_not_a_complete_fit_or_does_not_fit_is_refused_in_one_line() {
     run(&copy, 1, &["not a complete fit folder", "malformed"]);
     let copy = copy_fit(&dir.path().join("b"));
     medial_io::npy::write_npy(&copy.join("momenta.npy"), &[2, 3], &[0.0; 6]).unwrap();
+    run(&copy, 1, &["momenta.npy", "differ from the SHA-256"]);
+    reseal(&copy);
     run(&copy, 1, &["momenta.npy", "[10, 503, 3]"]);
     let copy = copy_fit(&dir.path().join("c"));
     let momenta = medial_io::npy::read_npy(&copy.join("momenta.npy")).unwrap();
     let doubled: Vec<f64> = momenta.data.iter().map(|u| 2.0 * u).collect();
     medial_io::npy::write_npy(&copy.join("momenta.npy"), &momenta.shape, &doubled).unwrap();
+    reseal(&copy);
     run(&copy, 1, &["have changed since the fit"]);
     let fit = fit_dir();
     let image = example("target.nii.gz");

@@ -3,7 +3,7 @@
 //! regular files, damaged checkpoints refused, no hang, meaningless results never exit 0, and
 //! a commit that a SIGKILL at any instant leaves with the old or the new set whole.
 
-use crate::common::{one_line_error, s, text};
+use crate::common::{one_line_error, reseal, s, text};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -381,6 +381,7 @@ fn a_subnormal_log_value_and_a_huge_atom_count_end_at_once() {
     cells[data] = "1e-310";
     lines[last] = cells.join(",");
     std::fs::write(out.join("log.csv"), lines.join("\n") + "\n").unwrap();
+    reseal(&out);
     let o = within(&["report", s(&out)], 60).expect("medial report hung");
     assert!(o.status.success(), "{}", text(&o.stderr));
     let start = std::time::Instant::now();
@@ -830,4 +831,45 @@ fn a_commit_killed_at_any_step_leaves_the_old_or_the_new_set_whole() {
         instants += steps;
     }
     assert!(instants >= 200, "{instants} instants");
+}
+
+/// `medial report` writes its views as a new set of the folder: the files stay the tool's
+/// links, the digests hold for the views made again, the earlier generation goes; a result file
+/// changed after the fit is refused in one line naming it, by `report`, `apply` and `check`.
+#[test]
+fn a_report_is_a_new_set_and_a_changed_result_file_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let out = d.join("out");
+    fit(&quick_config(d), &out);
+    std::fs::remove_file(out.join("report.html")).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_medial"))
+        .args(["report", s(&out)])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    for file in ["report.html", "flow.glb", "momenta.npy", "summary.json"] {
+        let kind = std::fs::symlink_metadata(out.join(file))
+            .unwrap()
+            .file_type();
+        assert!(kind.is_symlink(), "{file} is no longer the tool's link");
+    }
+    let generations = std::fs::read_dir(out.join(".medial-sets")).unwrap().count();
+    assert_eq!(generations, 2, "one generation and its current link");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    assert!(summary["sha256"]["report.html"].is_string());
+    let mut bytes = std::fs::read(out.join("atoms.csv")).unwrap();
+    bytes[0] ^= 1;
+    std::fs::write(out.join("atoms.csv"), &bytes).unwrap();
+    for args in [vec!["report", s(&out)], vec!["check", s(&out)]] {
+        let line = one_line_error(&args, 1, &["atoms.csv", "SHA-256"]);
+        assert!(line.contains("differ"), "{line}");
+    }
+    reseal(&out);
+    let o = Command::new(env!("CARGO_BIN_EXE_medial"))
+        .args(["report", s(&out)])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o.stderr));
 }

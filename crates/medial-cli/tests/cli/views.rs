@@ -8,7 +8,7 @@
 //! `MEDIAL_REQUIRE_TOOLS=1`: python3 with VTK (Debian's python3-vtk9), node with the npm package
 //! gltf-validator (found through NODE_PATH), and Debian's chromium.
 
-use crate::common::{medial, one_line_error, s, text};
+use crate::common::{medial, one_line_error, reseal, s, text};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -356,6 +356,7 @@ fn report_command_writes_the_views_again_and_shows_extra_columns() {
         })
         .collect();
     std::fs::write(copy.join("time_points.csv"), extended).unwrap();
+    reseal(&copy);
     let o = medial(&["report", s(&copy)]);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let html = std::fs::read_to_string(copy.join("report.html")).unwrap();
@@ -475,6 +476,7 @@ fn retarget(copy: &Path, line: &str) {
         "config.toml names no target"
     );
     std::fs::write(copy.join("config.toml"), changed.join("\n")).unwrap();
+    reseal(copy);
 }
 
 /// For a fit to a surface the same planes show the target surface's section (black) instead of
@@ -554,12 +556,17 @@ fn report_marks_the_switch_and_restarts_and_tabulates_the_alignment() {
         "initial similarity: scale 1.0383, voxel Dice 0.695 → 0.799",
         "initial affine: anisotropy 11.3 %, voxel Dice 0.799 → 0.803"
     ]);
+    summary["files"]
+        .as_array_mut()
+        .unwrap()
+        .push("alignment.txt".into());
     std::fs::write(copy.join("summary.json"), summary.to_string()).unwrap();
     std::fs::write(
         copy.join("alignment.txt"),
         "1.5 0 0 2\n0 1 0 0\n0 0 1 0\n0 0 0 1\n",
     )
     .unwrap();
+    reseal(&copy);
     let o = medial(&["report", s(&copy)]);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let html = std::fs::read_to_string(copy.join("report.html")).unwrap();

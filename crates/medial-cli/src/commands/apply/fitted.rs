@@ -187,6 +187,10 @@ fn complete_set(dir: &Path) -> Result<Listed, CliError> {
             return Err(not_complete(format!("{file} is not among its results")));
         }
     }
+    // The files that make the map are checked; the flow's time points and the views are not
+    // read here (a fit folder copied without them still carries images).
+    let unread = |r: &str| r.starts_with("flow/") || crate::report::is_view(r);
+    crate::results::verify(dir, "summary.json", unread)?;
     Ok(listed)
 }
 
