@@ -21,6 +21,10 @@
 //!   or of the final rasterization);
 //! * **a grid to rasterize** ([`Estimate::grid`]), `V` voxels: `24·V` (the `f64` volume, the
 //!   buffer its slices are collected in, the 8-bit copy written);
+//! * **an initial alignment** ([`Estimate::alignment`]): the template rasterized on a grid of
+//!   `V_g` voxels (`24·V_g`, as above) and, for an image of `V` voxels, `40·V`: the image read
+//!   and its foreground (8 B each) and the template rasterized on the image's grid for the
+//!   voxel Dice (24 B, as a grid);
 //! * **a pull-back of an image through a fitted map** ([`Estimate::pull_back`]), `V` voxels of
 //!   the output grid: `128·V` (the voxel centres and the points they map to, their
 //!   displacements and the warp's values, 24 B each; the resampled values and the bytes
@@ -44,6 +48,9 @@ const FLOW_VECTORS: f64 = 20.0;
 
 /// Constraints per landmark and time point, at most (see the module documentation).
 const CONSTRAINTS_PER_LANDMARK: f64 = 3.0;
+
+/// Bytes per image voxel of an initial alignment (see the module documentation).
+const ALIGNMENT_IMAGE_BYTES: f64 = 40.0;
 
 /// Bytes per output voxel of a pull-back.
 const PULL_BACK_BYTES: f64 = 128.0;
@@ -95,6 +102,18 @@ impl Estimate {
                 ("image copies", 32.0 * voxels as f64),
             ],
         }
+    }
+
+    /// An initial alignment against an image (or a rasterized surface) of `image_voxels`
+    /// voxels that rasterizes the template on a grid of `grid` voxels for its moments.
+    pub fn alignment(grid: [usize; 3], image_voxels: usize) -> Self {
+        let mut estimate = Self::grid(grid);
+        estimate.parts[0].0 = "the template's grid";
+        estimate.parts.push((
+            "the image, its foreground and the template rasterized on it",
+            ALIGNMENT_IMAGE_BYTES * image_voxels as f64,
+        ));
+        estimate
     }
 
     /// A grid of `dims` voxels to rasterize.

@@ -111,7 +111,7 @@ pub fn initial_alignment(
     match target {
         Target::Image { volume, label } => {
             let h = volume.spacing().min();
-            check_grid(boundary, h, memory)?;
+            check_grid(boundary, h, volume.data().len(), memory)?;
             align_to_image(boundary, &volume.foreground(*label))
         }
         Target::Points(q) => align_to_points(boundary, q),
@@ -120,10 +120,10 @@ pub fn initial_alignment(
 }
 
 /// Refuses a grid of voxel `h` around `mesh` (as [`grid_around`] makes it, 2 voxels of margin)
-/// past `memory`.
-fn check_grid(mesh: &TriMesh, h: f64, memory: MemoryLimit) -> Result<()> {
+/// beside an image of `image_voxels` voxels past `memory` ([`Estimate::alignment`]).
+fn check_grid(mesh: &TriMesh, h: f64, image_voxels: usize, memory: MemoryLimit) -> Result<()> {
     let (dims, _) = grid_around(mesh, h, 2.0 * h)?;
-    memory.check(&Estimate::grid(dims), || {
+    memory.check(&Estimate::alignment(dims, image_voxels), || {
         format!(
             "the initial alignment's grid of {h:.3} mm voxels ({}×{}×{})",
             dims[0], dims[1], dims[2]
@@ -224,10 +224,10 @@ fn align_to_surface(
             )],
         ));
     }
-    check_grid(mesh, spacing, memory)?;
+    check_grid(mesh, spacing, 0, memory)?;
     let (dims, grid) = grid_around(mesh, spacing, 2.0 * spacing)?;
     let mask = rasterize(mesh, dims, grid)?;
-    check_grid(boundary, spacing, memory)?;
+    check_grid(boundary, spacing, mask.data().len(), memory)?;
     align_to_image(boundary, &mask)
 }
 
@@ -365,4 +365,35 @@ fn mean_spoke(template: &MedialTemplate) -> f64 {
         .map(|b| (q[b] - q[template.atom_landmark(atoms[b])]).norm())
         .sum::<f64>()
         / n.max(1) as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Matrix4;
+
+    /// The alignment's estimate adds the image beside the template's grid: a limit that holds
+    /// the grid alone but not both refuses before anything is allocated, naming both parts.
+    #[test]
+    fn the_alignment_counts_the_image_beside_its_grid() {
+        let (points, triangles) = crate::testing::meshes::octahedron();
+        let mesh = TriMesh::new(points.iter().map(|p| p * 4.0).collect(), triangles).unwrap();
+        // The template's grid at the image's 1 mm voxels.
+        let (dims, _) = grid_around(&mesh, 1.0, 2.0).unwrap();
+        let grid = Estimate::grid(dims).total();
+        let n = 64;
+        let image = Volume::new([n, n, n], vec![1.0; n * n * n], Matrix4::identity()).unwrap();
+        let target = Target::Image {
+            volume: image,
+            label: None,
+        };
+        let limit = MemoryLimit::bytes(grid + 40.0 * (n * n * n) as f64 - 1.0);
+        let e = initial_alignment(&mesh, &target, 1.0, limit).unwrap_err();
+        let message = e.to_string();
+        assert!(message.contains("the image, its foreground"), "{message}");
+        assert!(message.contains("the template's grid"), "{message}");
+        MemoryLimit::bytes(grid + 40.0 * (n * n * n) as f64)
+            .check(&Estimate::alignment(dims, n * n * n), String::new)
+            .unwrap();
+    }
 }
