@@ -164,14 +164,17 @@ pub const TIME_STEPS: usize = 10;
 /// later stages are on their budgets already).
 pub const COARSE_TIME_STEPS: usize = 5;
 
-/// Against an image (Dice): μ = 2 … 20000 over 5 AL iterations of 120 L-BFGS iterations, the
-/// first up to 600 while it makes 1 % progress per 40; three of them coarse. A small first μ
-/// lets the first AL iteration wander far from the constraints and later ones pull it back; a
-/// template projected onto them can start higher.
+/// Against an image (Dice): μ = 2 … 20000 over 5 AL iterations, each up to 600 L-BFGS
+/// iterations while it makes 1 % progress per 40; three of them coarse. A small first μ lets
+/// the first AL iteration wander far from the constraints and later ones pull it back; a
+/// template projected onto them can start higher. Every AL iteration runs until the progress
+/// rule ends it: the multiplier update `λ ← λ − μ C` is sound only at an approximate minimiser
+/// of its penalty, and a fixed budget that cuts the minimisation short (120 before, decision
+/// 0034) leaves the constraints where the cut found them, whatever μ.
 const DICE: Schedule = Schedule {
     mu: 2.0,
     al_iterations: 5,
-    max_iterations: 120,
+    max_iterations: 600,
     first: Some(FirstIteration {
         budget: 600,
         window: 40,
@@ -610,6 +613,16 @@ mod tests {
             kernel_tolerance(1.5, &landmarks)
         );
         assert!(safer(&spec, &landmarks, RETRIES + 1).is_none());
+    }
+
+    /// Decision 0034: no AL iteration of the automatic Dice stage is cut before its progress
+    /// rule ends it, the later ones no shorter than the first.
+    #[test]
+    fn every_dice_al_iteration_runs_until_its_progress_rule_ends_it() {
+        let stage = constrained("dice", AttachmentSpec::Ssd, DICE);
+        let first = stage.schedule.first_iterations.expect("a first budget");
+        assert!(stage.lbfgs.progress.is_some());
+        assert!(stage.lbfgs.max_iterations >= first);
     }
 
     fn line(n: usize) -> Vec<Vec3> {
