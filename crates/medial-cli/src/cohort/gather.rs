@@ -256,7 +256,12 @@ fn write_thickness(dir: &Path, template: &MedialTemplate, fitted: &[&str]) -> Re
     let atoms = template.medial_count();
     let rows = fitted
         .iter()
-        .map(|name| thickness_at_end(&dir.join(name).join("fitted_template.vtk"), atoms))
+        .map(|name| {
+            let subject = dir.join(name);
+            // The file read, checked against the digest its fit recorded.
+            crate::results::verify(&subject, "summary.json", |r| r != FITTED)?;
+            thickness_at_end(&subject.join(FITTED), atoms)
+        })
         .collect::<Result<Vec<_>, _>>()?;
     medial_io::npy::write_npy(
         &dir.join(THICKNESS_NPY),
@@ -282,6 +287,9 @@ fn write_thickness(dir: &Path, template: &MedialTemplate, fitted: &[&str]) -> Re
     vtk::write_polydata(&mean_path, &sheet, write_options(false))?;
     Ok(())
 }
+
+/// A subject's fitted template, the file the thickness is read from.
+const FITTED: &str = "fitted_template.vtk";
 
 /// The thickness of every atom of the fitted template `path`, which must have `atoms` atoms:
 /// [`SpokeMetrics`]' `thickness`, as the `Thickness` array of the medial VTK files.

@@ -295,6 +295,24 @@ fn a_batch_records_a_failure_goes_on_skips_on_a_rerun_and_gathers_the_thickness(
     for (f, before) in outputs.iter().zip(&first) {
         assert_eq!(&bytes(&out.join(f)), before, "{f}");
     }
+
+    // A fitted template changed after its fit is refused by the gathering, naming it.
+    let fitted = out.join("s30/fitted_template.vtk");
+    let mut damaged = bytes(&fitted);
+    let at = damaged.len() / 2;
+    damaged[at] ^= 1;
+    std::fs::write(&fitted, damaged).unwrap();
+    run_fails(
+        &[
+            "batch",
+            s(&toy_template()),
+            s(&subjects),
+            "--out",
+            s(&out),
+            "--gather-only",
+        ],
+        &["s30", "fitted_template.vtk", "SHA-256"],
+    );
 }
 
 #[test]
