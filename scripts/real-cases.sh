@@ -42,24 +42,9 @@ data="$(cd "$data" && pwd)"
 mkdir -p "$out"
 out="$(cd "$out" && pwd)"
 
-cargo build --release -p medial-cli --manifest-path "$root/Cargo.toml"
-target_dir="${CARGO_TARGET_DIR:-$root/target}"
-case "$target_dir" in /*) ;; *) target_dir="$root/$target_dir" ;; esac
-medial="$target_dir/release/medial"
-
-# run STEP STDOUT CMD...: runs CMD, its stdout to the file STDOUT, its stderr appended to the
-# case's log (after the command line); on failure remembers STEP and returns CMD's exit code.
-run() {
-  local step="$1" stdout="$2" rc=0
-  shift 2
-  { printf '+'; printf ' %q' "$@"; printf '\n'; } >>"$log"
-  "$@" >"$stdout" 2>>"$log" || rc=$?
-  if [ "$rc" -ne 0 ]; then
-    failed_step="$step"
-    echo "exit $rc" >>"$log"
-  fi
-  return "$rc"
-}
+# shellcheck source=scripts/cases-lib.sh
+source "$root/scripts/cases-lib.sh"
+build_medial
 
 # Each case sets `summary` (the fit's summary.json) and `command` (the fit as a user types it)
 # before running; it returns the exit code of its first failing step.
@@ -202,10 +187,7 @@ for c in "${cases[@]}"; do
   rows+=("$(row "$c" "$rc" "$failed_step" "$summary" "$log" "$command" "$wall")")
 done
 
-commit="$(git -C "$root" rev-parse --short HEAD 2>/dev/null || echo "not a git checkout")"
-if [ "$commit" != "not a git checkout" ] && [ -n "$(git -C "$root" status --porcelain --untracked-files=no 2>/dev/null)" ]; then
-  commit="$commit with uncommitted changes"
-fi
+commit="$(commit_of_root)"
 {
   echo "Made by \`bash scripts/real-cases.sh\` on $(date -u '+%Y-%m-%d %H:%M UTC'), $("$medial" --version), commit $commit,"
   echo "$(nproc) cores, load average at the end $(cut -d' ' -f1-3 /proc/loadavg 2>/dev/null || echo unknown)."
