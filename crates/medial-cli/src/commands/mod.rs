@@ -103,7 +103,7 @@ pub enum Command {
     Synth(synth::SynthArgs),
     /// Build a medial template from a shape (a segmentation or a closed mesh): its medial sheet
     /// (exact distance transform, ridge, a triangular lattice with a radius per vertex), one Loop
-    /// subdivision, inflation, projection, the automatic Dice fit to the shape itself and
+    /// subdivision, inflation, projection, a short Dice fit to the shape itself (two AL iterations) and
     /// projection again; writes TEMPLATE.vtk and its figures as JSON (printed too).
     Template(template::TemplateArgs),
     /// Rasterize a closed triangle mesh into a binary NIfTI mask.
