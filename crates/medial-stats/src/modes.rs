@@ -186,6 +186,11 @@ impl ShapeModes {
         ))
     }
 
+    /// Of atoms, every boundary point's atom (empty for boundaries).
+    pub fn atom_of(&self) -> &[usize] {
+        &self.atom_of
+    }
+
     /// The boundary points of `shape` (one of these modes' shapes): its points for a
     /// boundary's, for atoms every boundary point at its atom's position plus its atom's
     /// radius times its mean aligned spoke over its atom's mean radius.

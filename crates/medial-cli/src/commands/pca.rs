@@ -5,7 +5,9 @@
 use crate::commands::stats::cohort::{Cohort, LeftOut};
 use crate::error::CliError;
 use crate::output::{print_json, write_json, write_options, write_text};
+use crate::report::study::pca_page;
 use medial_core::Vec3;
+use medial_io::gltf_flow::{AnimatedSurface, FlowAnimation};
 use medial_io::vtk::{self, ArrayKind, DataArray, PolyData, SeriesFile, ValueType};
 use medial_stats::shape::AtomShape;
 use medial_stats::{shape_modes, Alignment, ShapeModes, ShapeOf};
@@ -60,6 +62,8 @@ struct ModeSummary {
     explained: f64,
     cumulative: f64,
     series: Vec<PathBuf>,
+    /// The frames as one animated glTF file.
+    animation: PathBuf,
 }
 
 /// The triangles of the shapes' meshes: the boundary's, and the medial sheet's for atoms.
@@ -99,9 +103,64 @@ impl Meshes {
     }
 }
 
+impl Meshes {
+    /// The shapes of a mode's frames (at [`FRAMES_SD`]) as one animation: the boundary
+    /// (translucent) and, for atoms, the medial sheet, coloured by the local thickness (twice
+    /// the radius; a boundary point takes its atom's); frame n at time `FRAMES_SD[n] + 2` (a
+    /// glTF time is not negative), so the animation runs from −2 SD through the mean to +2 SD.
+    fn animation(&self, modes: &ShapeModes, shapes: &[AtomShape]) -> FlowAnimation {
+        let points = |p: &[[f64; 3]]| p.iter().map(|&x| Vec3::from(x)).collect::<Vec<_>>();
+        let thickness: Vec<Vec<f64>> = shapes
+            .iter()
+            .map(|s| s.radii.iter().map(|r| 2.0 * r).collect())
+            .collect();
+        let atoms = self.medial.is_some();
+        let mut surfaces = vec![AnimatedSurface {
+            name: "boundary".into(),
+            triangles: self.boundary.clone(),
+            frames: shapes.iter().map(|s| points(&modes.boundary(s))).collect(),
+            values: if atoms {
+                thickness
+                    .iter()
+                    .map(|t| modes.atom_of().iter().map(|&m| t[m]).collect())
+                    .collect()
+            } else {
+                Vec::new()
+            },
+            opacity: if atoms { 0.35 } else { 1.0 },
+        }];
+        if let Some(triangles) = &self.medial {
+            surfaces.push(AnimatedSurface {
+                name: "medial".into(),
+                triangles: triangles.clone(),
+                frames: shapes.iter().map(|s| points(&s.points)).collect(),
+                values: thickness.clone(),
+                opacity: 1.0,
+            });
+        }
+        let range = thickness
+            .iter()
+            .flatten()
+            .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], &v| {
+                [lo.min(v), hi.max(v)]
+            });
+        FlowAnimation {
+            times: FRAMES_SD.iter().map(|sd| sd + 2.0).collect(),
+            surfaces,
+            value_range: if range[0] < range[1] {
+                range
+            } else {
+                [0.0, 1.0]
+            },
+            value_name: "thickness (mm)".into(),
+        }
+    }
+}
+
 /// Reads the cohort, computes its modes, writes DIR/modes.csv, DIR/scores.csv,
 /// DIR/mean_boundary.vtk (and mean_medial.vtk), each mode's ±2 SD shapes as
-/// DIR/modeK_boundary.vtk.series (and modeK_medial.vtk.series) of the frames in DIR/modeK/, and
+/// DIR/modeK_boundary.vtk.series (and modeK_medial.vtk.series) of the frames in DIR/modeK/ and
+/// as the animation DIR/modeK.glb, DIR/report.html, and
 /// DIR/summary.json; prints the summary.
 pub fn run(args: &PcaArgs) -> Result<(), CliError> {
     if args.modes == 0 {
@@ -130,6 +189,7 @@ pub fn run(args: &PcaArgs) -> Result<(), CliError> {
         let dir = args.out.join(&folder);
         std::fs::create_dir_all(&dir).map_err(|e| CliError::io(&dir, e))?;
         let mut frames: Vec<Vec<SeriesFile>> = Vec::new();
+        let mut shapes = Vec::with_capacity(FRAMES_SD.len());
         for (n, &sd) in FRAMES_SD.iter().enumerate() {
             let shape = modes
                 .shape_at(mode, sd)
@@ -142,7 +202,10 @@ pub fn run(args: &PcaArgs) -> Result<(), CliError> {
                     time: sd,
                 });
             }
+            shapes.push(shape);
         }
+        let glb = args.out.join(format!("{folder}.glb"));
+        medial_io::gltf_flow::write_flow_glb(&glb, &meshes.animation(&modes, &shapes))?;
         let mut series = Vec::new();
         for (list, kind) in frames.iter().zip(["boundary", "medial"]) {
             let path = args.out.join(format!("{folder}_{kind}.vtk.series"));
@@ -157,6 +220,7 @@ pub fn run(args: &PcaArgs) -> Result<(), CliError> {
             explained: fraction,
             cumulative,
             series,
+            animation: glb,
         });
     }
     let mut table = String::from("mode,variance_mm2,sd_mm,explained,cumulative\n");
@@ -180,11 +244,19 @@ pub fn run(args: &PcaArgs) -> Result<(), CliError> {
         scores.push('\n');
     }
     write_text(&args.out.join("scores.csv"), &scores)?;
+    let subjects: Vec<String> = names.iter().map(|s| s.to_string()).collect();
+    let page = pca_page(
+        &args.input.display().to_string(),
+        &explained,
+        &modes.pca.scores.columns(0, k).into_owned(),
+        &subjects,
+    )?;
+    write_text(&args.out.join("report.html"), &page)?;
     let summary = Summary {
         input: args.input.clone(),
         of: args.of.name(),
         alignment: args.align.name(),
-        subjects: names.iter().map(|s| s.to_string()).collect(),
+        subjects,
         left_out,
         gpa_rounds: modes.gpa.rounds,
         total_variance_mm2: modes.pca.total_variance,

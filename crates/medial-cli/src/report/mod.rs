@@ -20,6 +20,7 @@ mod overlay;
 mod page;
 mod png;
 mod render;
+pub mod study;
 mod table;
 
 use crate::error::CliError;

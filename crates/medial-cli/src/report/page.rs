@@ -24,7 +24,8 @@ const STAGE_COLUMNS: [&str; 6] = [
 const BINS: usize = 30;
 
 /// The page's style sheet.
-const STYLE: &str = "body{font-family:sans-serif;margin:2em auto;max-width:1000px;color:#222}\
+pub(crate) const STYLE: &str =
+    "body{font-family:sans-serif;margin:2em auto;max-width:1000px;color:#222}\
 h1{font-size:1.6em}h2{margin-top:1.8em;border-bottom:1px solid #ccc}\
 table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ddd;padding:3px 8px;\
 text-align:right;font-size:0.9em}th{background:#f4f4f4}td.key,th.key{text-align:left}\

@@ -19,6 +19,7 @@ mod reliability;
 mod resume;
 mod stats;
 mod stats_cohort;
+mod stats_report;
 mod template;
 mod templates;
 mod transform;

@@ -102,6 +102,7 @@ fn stats_on_meshglm_points_writes_every_map_and_the_clusters() {
     let written: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(written, summary);
+    crate::stats_report::check_stats_report(&out, &summary);
 }
 
 #[test]

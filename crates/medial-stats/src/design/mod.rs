@@ -150,6 +150,42 @@ impl Design {
         self.names.iter().position(|n| n == name)
     }
 
+    /// The subjects of every group: for each categorical column every level (the reference's
+    /// rows are those with none of the factor's indicators), and for every other column
+    /// whose values are all 0 or 1 and not all 1 (a group indicator of a matrix design, not the
+    /// intercept) the rows with 1. Each entry is (column or factor, level, subjects); the level
+    /// is empty for a column.
+    pub fn group_sizes(&self) -> Vec<(String, String, usize)> {
+        let rows = self.subjects();
+        let ones = |j: usize| (0..rows).filter(|&i| self.matrix[(i, j)] == 1.0).count();
+        let mut sizes = Vec::new();
+        let mut in_factor = vec![false; self.names.len()];
+        for factor in &self.factors {
+            let column = |level: &str| self.column(&format!("{}[{level}]", factor.name));
+            let indicators: Vec<usize> = factor.levels.iter().filter_map(|l| column(l)).collect();
+            for &j in &indicators {
+                in_factor[j] = true;
+            }
+            for level in &factor.levels {
+                let n = match column(level) {
+                    Some(j) => ones(j),
+                    None => (0..rows)
+                        .filter(|&i| indicators.iter().all(|&j| self.matrix[(i, j)] == 0.0))
+                        .count(),
+                };
+                sizes.push((factor.name.clone(), level.clone(), n));
+            }
+        }
+        for (j, name) in self.names.iter().enumerate() {
+            let column = self.matrix.column(j);
+            let binary = column.iter().all(|&v| v == 0.0 || v == 1.0);
+            if !in_factor[j] && binary && column.iter().any(|&v| v == 0.0) {
+                sizes.push((name.clone(), String::new(), ones(j)));
+            }
+        }
+        sizes
+    }
+
     /// Subjects (rows).
     pub fn subjects(&self) -> usize {
         self.matrix.nrows()

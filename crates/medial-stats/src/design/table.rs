@@ -208,6 +208,23 @@ mod tests {
     }
 
     #[test]
+    fn group_sizes_count_every_level_and_indicator_column() {
+        let d = Design::from_csv(TABLE, &TableOptions::default()).unwrap();
+        let size = |name: &str, level: &str, n: usize| (name.to_string(), level.to_string(), n);
+        assert_eq!(
+            d.group_sizes(),
+            [
+                size("group", "control", 2),
+                size("group", "pat,ient", 1),
+                size("group", "patient", 1)
+            ]
+        );
+        // A matrix design: 0/1 columns are groups, the intercept and covariates are not.
+        let m = Design::from_whitespace("1 1 0 3.5\n1 0 1 2\n1 0 1 0\n").unwrap();
+        assert_eq!(m.group_sizes(), [size("x2", "", 1), size("x3", "", 2)]);
+    }
+
+    #[test]
     fn columns_references_and_forced_categories() {
         let options = TableOptions {
             columns: Some(vec!["site".into(), "age".into()]),

@@ -165,6 +165,33 @@ pub(crate) fn run(glm: &Glm, scheme: &Scheme, tail: Tail, spatial: Option<Spatia
     }
 }
 
+/// The critical value of a null distribution at level `alpha`: the smallest of its values
+/// whose p (as the p-values of permutations count it: the fraction of the N maxima, the identity included,
+/// that reach it) is at most `alpha`, so that an observed value is significant exactly when it
+/// reaches it: the (N − ⌊alpha N⌋ + 1)-th smallest without ties (the 951st of 1,000 at 0.05).
+/// `None` for an empty distribution or one too short for any value to reach `alpha`.
+///
+/// ```
+/// let null: Vec<f64> = (1..=100).map(f64::from).collect();
+/// assert_eq!(medial_stats::permutation::critical_value(&null, 0.05), Some(96.0));
+/// ```
+pub fn critical_value(null: &[f64], alpha: f64) -> Option<f64> {
+    let mut sorted = null.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let n = sorted.len();
+    let allowed = ((alpha * n as f64).floor() as usize).min(n);
+    if allowed == 0 {
+        return None;
+    }
+    let candidate = sorted[n - allowed];
+    let reaching = n - sorted.partition_point(|&x| x < candidate);
+    if reaching <= allowed {
+        Some(candidate)
+    } else {
+        sorted.into_iter().find(|&x| x > candidate)
+    }
+}
+
 /// For each value, the fraction of `null` that reaches it: #{k : nullₖ ≥ v} / N (NaN for NaN).
 pub(crate) fn exceedance(values: impl Iterator<Item = f64>, null: &[f64]) -> Vec<f64> {
     let mut sorted = null.to_vec();

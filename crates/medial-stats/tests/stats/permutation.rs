@@ -301,3 +301,34 @@ fn a_design_that_no_permutation_changes_is_refused() {
     .unwrap();
     assert!(r.p.iter().all(|p| (0.0..=1.0).contains(p)));
 }
+
+/// The critical value is the smallest value significant at α by the p-values' own count.
+#[test]
+fn the_critical_value_is_the_smallest_significant_value() {
+    use medial_stats::permutation::critical_value;
+    let null: Vec<f64> = (0..201).map(|k| ((k * 37) % 201) as f64 * 0.1).collect();
+    let p = |v: f64| null.iter().filter(|&&x| x >= v).count() as f64 / null.len() as f64;
+    for alpha in [0.05, 0.01, 0.5] {
+        let c = critical_value(&null, alpha).unwrap();
+        assert!(p(c) <= alpha, "alpha {alpha}: p({c}) = {}", p(c));
+        let below = null
+            .iter()
+            .copied()
+            .filter(|&x| x < c)
+            .fold(f64::MIN, f64::max);
+        assert!(
+            p(below) > alpha,
+            "alpha {alpha}: {below} is significant too"
+        );
+    }
+    assert_eq!(critical_value(&[], 0.05), None);
+    // Too few maxima for p ≤ 0.05 (the smallest p is 1/19); ties at the rank are passed over.
+    assert_eq!(critical_value(&[1.0; 19], 0.05), None);
+    let tied: Vec<f64> = (0..20)
+        .map(|k| if k >= 18 { 50.0 } else { k as f64 })
+        .collect();
+    assert_eq!(critical_value(&tied, 0.05), None);
+    let mut tied = tied;
+    tied.push(60.0);
+    assert_eq!(critical_value(&tied, 0.05), Some(60.0));
+}

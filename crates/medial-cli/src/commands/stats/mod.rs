@@ -5,7 +5,9 @@
 
 use crate::error::CliError;
 use crate::output::{print_json, write_json, write_options, write_text};
+use crate::report::study::{stats_page, MapMesh, Tested};
 use medial_io::vtk::{self, ArrayKind, DataArray, PolyData, ValueType};
+use medial_stats::permutation::critical_value;
 use medial_stats::{
     atom_values, cluster_outlines, diffusion_time, Alignment, AtomMeasure, Contrast,
     ContrastResult, Design, Elements, Mesh, Observations, Options, SheetNormals, Study, Support,
@@ -205,20 +207,10 @@ struct ContrastSummary {
     clusters: Option<usize>,
     significant_clusters: Option<usize>,
     min_p_tfce: Option<f64>,
-    /// The 95th percentile of each null distribution (the FWER 5 % critical values).
+    /// The critical value of each null distribution at FWER 5 % (the smallest value with p ≤ 0.05).
     critical_statistic: Option<f64>,
     critical_cluster_area_mm2: Option<f64>,
     critical_tfce: Option<f64>,
-}
-
-/// The 95th percentile (the value reached by 5 % of the permutations).
-fn critical(null: &[f64]) -> Option<f64> {
-    if null.is_empty() {
-        return None;
-    }
-    let mut sorted = null.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    Some(sorted[((0.95 * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len()) - 1])
 }
 
 fn finite_min(v: &[f64]) -> f64 {
@@ -625,8 +617,10 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
             out.point_data.extend(input.extra.iter().cloned());
         }
         vtk::write_polydata(&folder.join("stats.vtk"), &out, write_options(true))?;
-        if let Some(text) = clusters_csv(&r, &centre) {
-            write_text(&folder.join("clusters.csv"), &text)?;
+        let clusters_table =
+            clusters_csv(&r, &centre).map(|text| (text, folder.join("clusters.csv")));
+        if let Some((text, path)) = &clusters_table {
+            write_text(path, text)?;
         }
         if let Some(c) = &r.clusters {
             let outline = cluster_outlines(&mesh, support, &c.found.labels);
@@ -647,8 +641,29 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
             )?;
         }
         summaries.push(contrast_summary(contrast, &r, folder));
-        results.push(r);
+        results.push((r, clusters_table));
     }
+    let map_mesh = medial_core::TriMesh::new(input.points.clone(), triangles.clone())
+        .map_err(|e| CliError::Input(format!("{}: {e}", args.input.display())))?;
+    let tested: Vec<Tested> = contrasts
+        .iter()
+        .zip(&results)
+        .map(|(contrast, (result, clusters))| Tested {
+            contrast,
+            result,
+            clusters: clusters.clone(),
+        })
+        .collect();
+    let page = stats_page(
+        &args.input.display().to_string(),
+        study.design(),
+        &MapMesh {
+            mesh: &map_mesh,
+            cells: args.cell,
+        },
+        &tested,
+    )?;
+    write_text(&args.out.join("report.html"), &page)?;
     let summary = Summary {
         input: args.input.clone(),
         source: input.source,
@@ -713,8 +728,8 @@ fn contrast_summary(contrast: &Contrast, r: &ContrastResult, folder: PathBuf) ->
             .filter(|_| r.permutations.is_some())
             .map(|c| c.p_area.iter().filter(|&&p| p <= 0.05).count()),
         min_p_tfce: r.p_tfce.as_deref().map(finite_min),
-        critical_statistic: critical(&r.null.statistic),
-        critical_cluster_area_mm2: critical(&r.null.area),
-        critical_tfce: critical(&r.null.tfce),
+        critical_statistic: critical_value(&r.null.statistic, 0.05),
+        critical_cluster_area_mm2: critical_value(&r.null.area, 0.05),
+        critical_tfce: critical_value(&r.null.tfce, 0.05),
     }
 }
