@@ -1,6 +1,18 @@
 # Helpers shared by scripts/real-cases.sh and scripts/synthetic-cases.sh (sourced, not run).
 # The sourcing script sets `root` (the repository root) first.
 
+# absolute_folders SCRIPT NEEDED: refuses (exit 1) a data folder `$data` without the path NEEDED
+# in it, then makes `data` and `out` (created if needed) absolute.
+absolute_folders() {
+  if [ ! -e "$data/$2" ]; then
+    echo "$1: '$data' is not the shared data folder (no $2 in it)" >&2
+    exit 1
+  fi
+  data="$(cd "$data" && pwd)"
+  mkdir -p "$out"
+  out="$(cd "$out" && pwd)"
+}
+
 # build_medial: builds the release binary and sets `target_dir` and `medial`.
 build_medial() {
   cargo build --release -p medial-cli --manifest-path "$root/Cargo.toml"

@@ -34,16 +34,9 @@ if [ "${#positional[@]}" -gt 2 ]; then
 fi
 data="${positional[0]:-$root/../shared/data}"
 out="${positional[1]:-$root/target/real-cases}"
-if [ ! -d "$data/cmrep" ]; then
-  echo "real-cases.sh: '$data' is not the shared data folder (no cmrep/ in it)" >&2
-  exit 1
-fi
-data="$(cd "$data" && pwd)"
-mkdir -p "$out"
-out="$(cd "$out" && pwd)"
-
 # shellcheck source=scripts/cases-lib.sh
 source "$root/scripts/cases-lib.sh"
+absolute_folders real-cases.sh cmrep
 build_medial
 
 # Each case sets `summary` (the fit's summary.json) and `command` (the fit as a user types it)

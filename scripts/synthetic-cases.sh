@@ -37,16 +37,9 @@ if [ "${#positional[@]}" -gt 1 ]; then
   exit 2
 fi
 out="${positional[0]:-$root/target/synthetic-cases}"
-if [ ! -f "$data/cmrep/t001_template_bcmrep.vtk" ]; then
-  echo "synthetic-cases.sh: '$data' is not the shared data folder (no cmrep/t001_template_bcmrep.vtk)" >&2
-  exit 1
-fi
-data="$(cd "$data" && pwd)"
-mkdir -p "$out"
-out="$(cd "$out" && pwd)"
-
 # shellcheck source=scripts/cases-lib.sh
 source "$root/scripts/cases-lib.sh"
+absolute_folders synthetic-cases.sh cmrep/t001_template_bcmrep.vtk
 build_medial
 
 # surface MESH.vtk OUT.obj: MESH (legacy ASCII VTK polydata, triangles) midpoint-subdivided, its

@@ -278,17 +278,16 @@ fn a_batch_records_a_failure_goes_on_skips_on_a_rerun_and_gathers_the_thickness(
         "thickness_mean.vtk",
     ];
     let first: Vec<Vec<u8>> = outputs.iter().map(|f| bytes(&out.join(f))).collect();
-    let o = run_fails(
-        &[
-            "batch",
-            s(&toy_template()),
-            s(&subjects),
-            "--out",
-            s(&out),
-            "--gather-only",
-        ],
-        &["1 of 3 subjects failed"],
-    );
+    let template = toy_template();
+    let gather = [
+        "batch",
+        s(&template),
+        s(&subjects),
+        "--out",
+        s(&out),
+        "--gather-only",
+    ];
+    let o = run_fails(&gather, &["1 of 3 subjects failed"]);
     let printed: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(printed["gathered"], 2);
     assert_eq!(printed["failed"], serde_json::json!(["bad"]));
@@ -302,17 +301,7 @@ fn a_batch_records_a_failure_goes_on_skips_on_a_rerun_and_gathers_the_thickness(
     let at = damaged.len() / 2;
     damaged[at] ^= 1;
     std::fs::write(&fitted, damaged).unwrap();
-    run_fails(
-        &[
-            "batch",
-            s(&toy_template()),
-            s(&subjects),
-            "--out",
-            s(&out),
-            "--gather-only",
-        ],
-        &["s30", "fitted_template.vtk", "SHA-256"],
-    );
+    run_fails(&gather, &["s30", "fitted_template.vtk", "SHA-256"]);
 }
 
 #[test]
