@@ -197,7 +197,7 @@ impl Fingerprint {
 }
 
 /// The SHA-256 digest of the file at `path`.
-fn digest_of(path: &Path) -> Result<[u8; 32], CliError> {
+pub(crate) fn digest_of(path: &Path) -> Result<[u8; 32], CliError> {
     let mut file = std::fs::File::open(path).map_err(|e| CliError::io(path, e))?;
     let mut hasher = Sha256::new();
     std::io::copy(&mut file, &mut hasher).map_err(|e| CliError::io(path, e))?;

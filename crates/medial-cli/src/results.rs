@@ -280,17 +280,10 @@ impl Listing {
     }
 }
 
-/// The SHA-256 of the file at `path`, in lowercase hex.
+/// The SHA-256 of the file at `path` ([`crate::checkpoint::digest_of`]), in lowercase hex.
 fn sha256_hex(path: &Path) -> Result<String, CliError> {
-    use sha2::Digest;
-    let mut file = std::fs::File::open(path).map_err(|e| CliError::io(path, e))?;
-    let mut hasher = sha2::Sha256::new();
-    std::io::copy(&mut file, &mut hasher).map_err(|e| CliError::io(path, e))?;
-    Ok(hasher
-        .finalize()
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect())
+    let digest = crate::checkpoint::digest_of(path)?;
+    Ok(digest.iter().map(|b| format!("{b:02x}")).collect())
 }
 
 /// Checks the files of the set the folder `dir` shows against the SHA-256 its marker
