@@ -431,15 +431,48 @@ impl Fold {
     }
 }
 
-/// The sheet Loop-subdivided once, inflated and projected onto its constraints.
+/// How many times at most the radius is lowered where the projected template's boundary
+/// intersects itself ([`inflated`]).
+const PROJECTED_SHRINK_ROUNDS: usize = 8;
+
+/// The factor the radius at such an atom is lowered by in each round: the inflation's own
+/// (`inflate::limit`), so that the lowering is as gradual as there.
+const PROJECTED_SHRINK: f64 = 0.8;
+
+/// The sheet Loop-subdivided once, inflated and projected onto its constraints. The
+/// inflation's boundary is free of self-intersections, but the projection moves spokes where
+/// sheets meet at a narrow angle at a seam (their spokes into the wedge between them then end
+/// close together): where the projected boundary intersects itself, the radius at the atoms of
+/// the triangles involved is lowered by [`PROJECTED_SHRINK`] and the sheet inflated and
+/// projected again, up to [`PROJECTED_SHRINK_ROUNDS`] times (the fit to the shape restores
+/// the thickness; a boundary still intersecting is reported by the verdict).
 fn inflated(sheet: &MedialSheet) -> Result<MedialTemplate> {
-    let inflated = inflate(&sheet.loop_subdivide()?)?;
-    let template = MedialTemplate::new(
-        inflated.boundary,
-        inflated.medial_index,
-        inflated.medial_points,
-    )?;
-    Ok(project(&template, &ProjectOptions::default())?.template)
+    let mut fine = sheet.loop_subdivide()?;
+    for round in 0..=PROJECTED_SHRINK_ROUNDS {
+        let inflated = inflate(&fine)?;
+        let template = MedialTemplate::new(
+            inflated.boundary,
+            inflated.medial_index,
+            inflated.medial_points,
+        )?;
+        let projected = project(&template, &ProjectOptions::default())?.template;
+        let boundary = projected.boundary_mesh()?;
+        let pairs = self_intersections(&boundary);
+        if pairs.is_empty() || round == PROJECTED_SHRINK_ROUNDS {
+            return Ok(projected);
+        }
+        let atoms = projected.medial_index();
+        let mut radius = fine.radius().to_vec();
+        let involved: std::collections::BTreeSet<usize> = (pairs.iter())
+            .flat_map(|&(a, b)| [a, b])
+            .flat_map(|t| boundary.triangles()[t].map(|v| atoms[v]))
+            .collect();
+        for &m in &involved {
+            radius[m] *= PROJECTED_SHRINK;
+        }
+        fine = MedialSheet::new(fine.points().to_vec(), fine.triangles().to_vec(), radius)?;
+    }
+    unreachable!("the last round returns")
 }
 
 /// First μ of the fit of a template to its own shape (relative constraint units), as the

@@ -10,8 +10,15 @@ use super::ridge::MedialPoint;
 use crate::construction::inflate::UnionFind;
 use crate::Vec3;
 
-/// Radius of the ball about a medial point whose points decide whether it is on a seam, voxels.
+/// Least radius of the ball about a medial point whose points decide whether it is on a seam,
+/// voxels: wider than the voxel noise of the cloud.
 const BALL_VOXELS: f64 = 4.0;
+/// Radius of that ball in the point's own radii, where it is larger than [`BALL_VOXELS`]: a
+/// medial point's scale is its radius. The sheets meeting at a seam branch from the centre of
+/// the ball that touches all three boundary parts there, and within less than its radius they
+/// are bent by that ball (their points' radii change as fast as their positions), so a ball
+/// scaled by the voxel alone sees a thick wall's junction as a gentle fold (decision 0402).
+const BALL_RADII: f64 = 1.0;
 /// A point is on a seam where the smallest eigenvalue of the covariance of the points in its
 /// ball is at least this fraction of their trace: about 0 on a sheet (flat on the scale of the
 /// ball), 1/4 on a straight seam of three half-discs at 120°.
@@ -65,39 +72,62 @@ impl Branches {
 
 /// The [`Branches`] of the medial points `points` of a mask of mean voxel `voxel` (mm).
 ///
-/// 1. A point is on a seam when the points within `r = 4·voxel` of it are not flat: the
-///    smallest eigenvalue of their covariance is at least 0.1 of the trace (`SEAM_FLATNESS`).
-/// 2. The seam points form seams (pieces by 26-neighbouring cells of `r`) and the other
-///    points, less those within `r` of a seam, form pieces of sheet (cells of 1.5 voxels, as
-///    [`medial_points`](super::medial_points) joins points); pieces with fewer than
-///    5 % of the points (`MIN_SHEET_FRACTION`) are spurs and are dropped.
-/// 3. A seam that at least three pieces reach (a point within `2r` of it) is a seam; the pieces
-///    on either side of one that fewer reach are one sheet.
-/// 4. The points left out of the pieces near a seam (within `r` of it), and those of lines of
-///    non-flat points that are not seams, go to the sheet of the nearest point of a piece
-///    within `2r`.
+/// 1. A point is on a seam when the points within its ball (radius `b = max(4·voxel, r)`,
+///    `r` the point's radius: [`BALL_VOXELS`], [`BALL_RADII`]) are not flat: the smallest
+///    eigenvalue of their covariance is at least 0.1 of the trace (`SEAM_FLATNESS`).
+/// 2. The seam points form seams (joined when each lies in the other's ball) and the other
+///    points, less those in the ball of a seam point, form pieces of sheet (cells of
+///    1.5 voxels, as [`medial_points`](super::medial_points) joins points); pieces with fewer
+///    than 5 % of the points (`MIN_SHEET_FRACTION`) are spurs and are dropped.
+/// 3. A seam that at least three pieces reach (a point within twice the ball of one of its
+///    points) and that is a line (its points span more than twice their mean ball) is a seam;
+///    the pieces on either side of one that fewer reach are one sheet.
+/// 4. The points left out of the pieces near a seam, and those of lines of non-flat points
+///    that are not seams, go to the sheet of the nearest point of a piece within twice the
+///    widest ball.
 pub fn branching(points: &[MedialPoint], voxel: f64) -> Branches {
-    let r = BALL_VOXELS * voxel;
+    let ball: Vec<f64> = (points.iter())
+        .map(|p| (BALL_VOXELS * voxel).max(BALL_RADII * p.radius))
+        .collect();
+    let widest = ball.iter().copied().fold(0.0, f64::max);
     let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
-    let grid = Grid::new(&positions, r);
+    let grid = Grid::new(&positions, widest);
     let on_seam: Vec<bool> = (0..positions.len())
         .into_par_iter()
         .map(|i| {
-            let near = grid.within(&positions, positions[i], r);
+            let near = grid.within(&positions, positions[i], ball[i]);
             near.len() >= MIN_BALL_POINTS && !flat(&positions, &near)
         })
         .collect();
     let seam_points: Vec<usize> = (0..positions.len()).filter(|&i| on_seam[i]).collect();
     let seam_positions: Vec<Vec3> = seam_points.iter().map(|&i| positions[i]).collect();
-    // Cells of `r`: a seam's points, thinned where it crosses the voxels obliquely, stay one.
-    let seam_piece = pieces(&seam_positions, r);
-    let seam_grid = Grid::new(&seam_positions, 2.0 * r);
+    let seam_ball: Vec<f64> = seam_points.iter().map(|&i| ball[i]).collect();
+    let seam_grid = Grid::new(&seam_positions, 2.0 * widest);
+    // Seam points within the smaller of their balls are one seam: a seam's points, thinned
+    // where it crosses the voxels obliquely, stay one.
+    let seam_piece = {
+        let mut uf = UnionFind::new(seam_points.len());
+        for (k, p) in seam_positions.iter().enumerate() {
+            for j in seam_grid.within(&seam_positions, *p, seam_ball[k]) {
+                if (seam_positions[j] - p).norm() <= seam_ball[j] {
+                    uf.union(k, j);
+                }
+            }
+        }
+        (0..seam_points.len())
+            .map(|k| uf.find(k))
+            .collect::<Vec<_>>()
+    };
+    // The seam point whose ball holds `p`, if any.
+    let near_seam = |p: Vec3, times: f64| {
+        seam_grid
+            .within(&seam_positions, p, times * widest)
+            .into_iter()
+            .find(|&s| (seam_positions[s] - p).norm() <= times * seam_ball[s])
+    };
     let sheet_points: Vec<usize> = (0..positions.len())
-        .filter(|&i| {
-            seam_grid
-                .within(&seam_positions, positions[i], r)
-                .is_empty()
-        })
+        .into_par_iter()
+        .filter(|&i| near_seam(positions[i], 1.0).is_none())
         .collect();
     let sheet_positions: Vec<Vec3> = sheet_points.iter().map(|&i| positions[i]).collect();
     let sheet_piece = pieces(&sheet_positions, 1.5 * voxel);
@@ -116,23 +146,43 @@ pub fn branching(points: &[MedialPoint], voxel: f64) -> Branches {
     };
     // Which kept pieces reach each seam.
     let mut reach: HashMap<usize, HashSet<usize>> = HashMap::new();
-    for (k, &p) in sheet_piece.iter().enumerate() {
-        if !kept.contains(&p) {
-            continue;
-        }
-        if let Some(&s) = seam_grid
-            .within(&seam_positions, sheet_positions[k], 2.0 * r)
-            .first()
-        {
-            reach.entry(seam_piece[s]).or_default().insert(p);
+    let reached: Vec<Option<usize>> = (0..sheet_points.len())
+        .into_par_iter()
+        .map(|k| {
+            if kept.binary_search(&sheet_piece[k]).is_err() {
+                return None;
+            }
+            near_seam(sheet_positions[k], 2.0)
+        })
+        .collect();
+    for (k, s) in reached.into_iter().enumerate() {
+        if let Some(s) = s {
+            reach
+                .entry(seam_piece[s])
+                .or_default()
+                .insert(sheet_piece[k]);
         }
     }
     let slot = |p: usize| kept.binary_search(&p).expect("a kept piece");
     let mut sheets = UnionFind::new(kept.len());
     let mut seam_numbers: Vec<usize> = Vec::new();
+    // A seam is a line: its points span more than twice their mean ball (fewer are a spot
+    // where sheets touch or a bump's tip, seen as non-flat by every ball about it).
+    let mut span: HashMap<usize, (Vec3, Vec3, f64, usize)> = HashMap::new();
+    for (k, p) in seam_positions.iter().enumerate() {
+        let e = span.entry(seam_piece[k]).or_insert((*p, *p, 0.0, 0));
+        e.0 = e.0.inf(p);
+        e.1 = e.1.sup(p);
+        e.2 += seam_ball[k];
+        e.3 += 1;
+    }
+    let a_line = |seam: usize| {
+        let (lo, hi, balls, n) = span[&seam];
+        (hi - lo).norm() > 2.0 * balls / n as f64
+    };
     for (&seam, pieces) in &reach {
         let pieces: Vec<usize> = pieces.iter().map(|&p| slot(p)).collect();
-        if pieces.len() >= 3 {
+        if pieces.len() >= 3 && a_line(seam) {
             seam_numbers.push(seam);
         } else if let [a, b] = pieces[..] {
             sheets.union(a, b);
@@ -162,7 +212,7 @@ pub fn branching(points: &[MedialPoint], voxel: f64) -> Branches {
     for (k, &i) in seam_points.iter().enumerate() {
         seam[i] = seam_numbers.binary_search(&seam_piece[k]).ok();
     }
-    assign_to_nearest_sheet(&positions, &mut sheet, &seam, 2.0 * r);
+    assign_to_nearest_sheet(&positions, &mut sheet, &seam, 2.0 * widest);
     Branches {
         counts: Branching {
             sheets: distinct.len(),
@@ -286,6 +336,71 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::construction::skeleton::seam::Seam;
+    use crate::construction::skeleton::{medial_points, MIN_FEATURE_ANGLE_DEG};
+    use crate::image::Volume;
+    use nalgebra::{Matrix4, Vector4};
+
+    /// A T of two walls of half thickness `h` (mm) on a grid of voxel `v`: the bar
+    /// `|y| ≤ h, |x| ≤ 18` and the stem `|x| ≤ h, 0 ≤ y ≤ 18`, both `|z| ≤ 14` (a ventricle's
+    /// wall running on through an insertion, the other wall branching off it).
+    fn t_walls(h: f64, v: f64) -> Volume {
+        let lo = Vec3::new(-20.0, -h - 2.0, -16.0);
+        let dims = [
+            (40.0 / v) as usize,
+            ((22.0 + h) / v) as usize,
+            (32.0 / v) as usize,
+        ];
+        let mut m = Matrix4::new_scaling(v);
+        m[(3, 3)] = 1.0;
+        m.fixed_view_mut::<3, 1>(0, 3).copy_from(&lo);
+        let [nx, ny, nz] = dims;
+        let data = (0..nx * ny * nz)
+            .map(|i| {
+                let ijk = Vector4::new(
+                    (i % nx) as f64,
+                    ((i / nx) % ny) as f64,
+                    (i / (nx * ny)) as f64,
+                    1.0,
+                );
+                let p = m * ijk;
+                let bar = p.y.abs() <= h && p.x.abs() <= 18.0;
+                let stem = p.x.abs() <= h && p.y >= 0.0 && p.y <= 18.0;
+                f64::from(u8::from((bar || stem) && p.z.abs() <= 14.0))
+            })
+            .collect();
+        Volume::new(dims, data, m).unwrap()
+    }
+
+    #[test]
+    fn the_seam_of_a_t_of_thick_walls_lies_at_its_junction_within_a_voxel() {
+        // The ball tangent to the bar's far face (y = −h) and to the two inner corners
+        // (±h, h) of the T is centred at (0, h/4) with radius 5h/4: the junction of the
+        // three sheets, not where the walls' mid-planes cross (y = 0). The sheets end about a
+        // radius short of the flat ends (|z| ≤ 14): the seam is checked where it is straight.
+        // Walls 16 voxels thick, as the heart's at its insertions: a ball of a few voxels
+        // sees only a gentle fold there.
+        let (h, v) = (4.0, 0.5);
+        let points = medial_points(&t_walls(h, v), MIN_FEATURE_ANGLE_DEG).unwrap();
+        let branches = branching(&points, v);
+        let counts = branches.counts;
+        assert_eq!((counts.sheets, counts.seams), (3, 1), "{counts:?}");
+        let on_seam: Vec<MedialPoint> = (branches.seam_points(0).iter())
+            .map(|&i| points[i])
+            .collect();
+        let seam = Seam::fit(&on_seam, v).unwrap();
+        // The mask's faces lie half a voxel beyond the last voxel centres inside.
+        let junction = (h + v / 2.0) / 4.0;
+        let middle: Vec<&Vec3> = seam.points.iter().filter(|p| p.z.abs() < 5.0).collect();
+        assert!(middle.len() > 5, "{seam:?}");
+        for p in middle {
+            let at = (p.x, p.y, p.z);
+            assert!(
+                p.x.abs() <= v && (p.y - junction).abs() <= v,
+                "a seam vertex at {at:?}"
+            );
+        }
+    }
 
     /// Points on a 0.5 mm grid of the half-planes `{w·u + z·e_z : 0 ≤ w ≤ 12, |z| ≤ 8}` for
     /// the directions `u` at the given angles (degrees).

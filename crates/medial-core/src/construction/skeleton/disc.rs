@@ -183,7 +183,10 @@ fn local_fit(
         })
         .collect();
     let c = solve(&robust).unwrap_or(first);
-    Ok((Vec3::new(c[0][0], c[1][0], c[2][0]), c[3][0]))
+    // A radius is positive, and a one-sided window at a steep rim can extrapolate it past 0:
+    // the fit is kept no lower than the least radius it was fitted to.
+    let least = (near.iter().map(|&i| cloud.points[i].radius)).fold(f64::INFINITY, f64::min);
+    Ok((Vec3::new(c[0][0], c[1][0], c[2][0]), c[3][0].max(least)))
 }
 
 /// Chart points bucketed in square cells of a given size.

@@ -139,7 +139,18 @@ pub struct ShapeSheet {
 /// [`stitch()`]; `InvalidParameter` for a non-positive sampling.
 pub fn sheet_of_mask(mask: &Volume, sampling: Sampling) -> Result<ShapeSheet> {
     let points = medial_points(mask, MIN_FEATURE_ANGLE_DEG)?;
-    let voxel = mask.spacing().mean();
+    sheet_of_points(points, mask.spacing().mean(), sampling)
+}
+
+/// The medial sheet through the medial points `points` of a mask of mean voxel `voxel` (mm),
+/// sampled as `sampling` says: [`sheet_of_mask`] after its first step.
+///
+/// Errors: those of [`sheet_of_mask`] but [`medial_points`]'.
+pub fn sheet_of_points(
+    points: Vec<MedialPoint>,
+    voxel: f64,
+    sampling: Sampling,
+) -> Result<ShapeSheet> {
     let branches = branching(&points, voxel);
     let counts = branches.counts;
     if counts.seams > 0 {

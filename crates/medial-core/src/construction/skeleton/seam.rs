@@ -4,11 +4,13 @@
 
 use super::ridge::MedialPoint;
 use super::MIN_FEATURE_ANGLE_DEG;
-use crate::mesh::centroid_and_covariance;
 use crate::{Error, Result, Vec3};
 
 /// Length of the bins along the seam's principal direction, voxels.
 const BIN_VOXELS: f64 = 2.0;
+/// A bin of a seam is the mean of its points whose radius is within this many voxels of its
+/// largest (the voxel noise of a medial point's radius is about half a voxel).
+const TOP_RADIUS_VOXELS: f64 = 0.5;
 /// Half width, in bins, of the moving mean that smooths the binned seam.
 const SMOOTHING_BINS: usize = 2;
 
@@ -23,25 +25,23 @@ pub struct Seam {
 
 impl Seam {
     /// The seam through the medial points `points` (those of one seam) of a mask of mean
-    /// voxel `voxel` (mm): with `d` the principal direction of the points and `t = (p − p̄)·d`,
-    /// the mean position and radius of the points in each bin of `t` of `BIN_VOXELS` voxels
-    /// (empty bins skipped), smoothed by a moving mean over `2·SMOOTHING_BINS + 1` bins (the
-    /// window shifted inside at the ends) across the seam, each bin kept at its own place
-    /// along `d`, and in radius (the window narrowed at the ends), then trimmed at each end while the radius
-    /// changes faster along it than `|dr/ds| = cos(MIN_FEATURE_ANGLE_DEG/2)` ≈ 0.57: where the
-    /// seam's line of medial points runs on into the shape's rounded end (radius falling to 0)
-    /// past where the sheets' free edges, trimmed by that slope, end.
+    /// voxel `voxel` (mm): with `t` each point's arc parameter along the seam ([`arc_of_points`]:
+    /// its distance along the cloud from one end, so that a curved seam, such as the one a
+    /// ventricle's insertion lines make round its apex, is followed along itself), the mean
+    /// position and radius of the points in each bin of `t` of `BIN_VOXELS` voxels (empty bins
+    /// skipped), smoothed by a moving mean over `2·SMOOTHING_BINS + 1` bins (the window shifted
+    /// inside at the ends) across the seam, each bin kept at its own place along the seam's
+    /// local direction, and in radius (the window narrowed at the ends), then trimmed at each
+    /// end while the radius changes faster along it than `|dr/ds| = cos(MIN_FEATURE_ANGLE_DEG/2)`
+    /// ≈ 0.57: where the seam's line of medial points runs on into the shape's rounded end
+    /// (radius falling to 0) past where the sheets' free edges, trimmed by that slope, end.
     ///
     /// Errors: `InvalidVolume` when fewer than two bins are left.
     pub fn fit(points: &[MedialPoint], voxel: f64) -> Result<Self> {
         let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
-        let (centre, covariance) = centroid_and_covariance(&positions);
-        let eigen = covariance.symmetric_eigen();
-        let axis = eigen.eigenvalues.imax();
-        let direction: Vec3 = eigen.eigenvectors.column(axis).into_owned();
         let bin = BIN_VOXELS * voxel;
-        let along: Vec<i64> = (positions.iter())
-            .map(|p| ((p - centre).dot(&direction) / bin).floor() as i64)
+        let along: Vec<i64> = (arc_of_points(&positions, voxel).iter())
+            .map(|t| (t / bin).floor() as i64)
             .collect();
         let lo = along.iter().copied().min().unwrap_or(0);
         let bins = along
@@ -49,12 +49,24 @@ impl Seam {
             .map(|&a| (a - lo) as usize + 1)
             .max()
             .unwrap_or(0);
+        // The junction's ball, touching the three boundary parts the sheets part, is the
+        // largest across the seam: each bin is the mean of its points within
+        // `TOP_RADIUS_VOXELS` of its largest radius, not of all its points (the points off the
+        // junction that see the three sheets lie further along the sheet with more points).
+        let mut largest = vec![0.0_f64; bins];
+        for (p, &a) in points.iter().zip(&along) {
+            let l = &mut largest[(a - lo) as usize];
+            *l = l.max(p.radius);
+        }
         let mut sum = vec![(Vec3::zeros(), 0.0, 0usize); bins];
         for (p, &a) in points.iter().zip(&along) {
-            let s = &mut sum[(a - lo) as usize];
-            s.0 += p.position;
-            s.1 += p.radius;
-            s.2 += 1;
+            let k = (a - lo) as usize;
+            if p.radius >= largest[k] - TOP_RADIUS_VOXELS * voxel {
+                let s = &mut sum[k];
+                s.0 += p.position;
+                s.1 += p.radius;
+                s.2 += 1;
+            }
         }
         let binned: Vec<(Vec3, f64)> = (sum.into_iter())
             .filter(|s| s.2 > 0)
@@ -70,20 +82,17 @@ impl Seam {
         }
         let n = binned.len();
         let steep = (MIN_FEATURE_ANGLE_DEG / 2.0).to_radians().cos();
-        let width = (2 * SMOOTHING_BINS + 1).min(n);
-        let smoothed = |k: usize| {
-            // Across the seam, the window about the bin shifted inside at the ends, the bin
-            // keeping its place along the seam; the radius over the symmetric window, narrowed
-            // at the ends (unbiased where the radius changes linearly).
-            let start = k.saturating_sub(SMOOTHING_BINS).min(n - width);
-            let window = &binned[start..start + width];
-            let mean = window.iter().map(|b| b.0).sum::<Vec3>() / width as f64;
-            let along = (binned[k].0 - mean).dot(&direction) * direction;
+        // The radius over the symmetric window, narrowed at the ends (unbiased where the
+        // radius changes linearly).
+        let radius = |k: usize| {
             let w = SMOOTHING_BINS.min(k).min(n - 1 - k);
-            let radius = binned[k - w..=k + w].iter().map(|b| b.1).sum::<f64>();
-            (mean + along, radius / (2 * w + 1) as f64)
+            binned[k - w..=k + w].iter().map(|b| b.1).sum::<f64>() / (2 * w + 1) as f64
         };
-        let smooth: Vec<(Vec3, f64)> = (0..n).map(smoothed).collect();
+        let positions: Vec<Vec3> = binned.iter().map(|b| b.0).collect();
+        let smooth: Vec<(Vec3, f64)> = (smoothed_across(&positions).into_iter())
+            .enumerate()
+            .map(|(k, p)| (p, radius(k)))
+            .collect();
         let slope = |k: usize| {
             let ((p, r), (q, s)) = (smooth[k], smooth[k + 1]);
             (s - r).abs() / (q - p).norm().max(f64::MIN_POSITIVE)
@@ -197,6 +206,122 @@ impl Seam {
     }
 }
 
+/// How far apart two points of a seam may be to be joined along it, voxels: the first of
+/// these that joins all its points ([`arc_of_points`]).
+const LINKS_VOXELS: [f64; 5] = [2.0, 4.0, 8.0, 16.0, 32.0];
+
+/// The arc parameter of each of a seam's points `positions` (mm, on a mask of mean voxel
+/// `voxel`): the arc length of its nearest point on the seam's spine, the shortest path
+/// between its two ends over the graph joining points at most a link apart (the first of
+/// [`LINKS_VOXELS`] that joins them all, or the piece of the first point at the widest), the
+/// ends being the point farthest from the first point and the point farthest from that one.
+/// Along a line of points, straight or curved, it grows as the arc length, where a projection
+/// onto one direction folds a curved line over itself.
+pub fn arc_of_points(positions: &[Vec3], voxel: f64) -> Vec<f64> {
+    if positions.len() < 2 {
+        return vec![0.0; positions.len()];
+    }
+    let mut spine = Vec::new();
+    for link in LINKS_VOXELS.map(|l| l * voxel) {
+        let neighbours = neighbours_within(positions, link);
+        let farthest = |from: &[f64]| {
+            (0..positions.len())
+                .filter(|&i| from[i].is_finite())
+                .max_by(|&a, &b| from[a].total_cmp(&from[b]))
+                .unwrap_or(0)
+        };
+        let (from_first, _) = shortest_paths(&neighbours, 0);
+        let start = farthest(&from_first);
+        let (from_start, previous) = shortest_paths(&neighbours, start);
+        let mut at = farthest(&from_start);
+        spine = vec![positions[at]];
+        while at != start {
+            at = previous[at];
+            spine.push(positions[at]);
+        }
+        if from_start.iter().all(|d| d.is_finite()) {
+            break;
+        }
+    }
+    // The path zigzags through the points across the seam: smoothed as the bins are.
+    let n = spine.len();
+    let points = smoothed_across(&spine);
+    let seam = Seam {
+        radius: vec![0.0; n],
+        points,
+    };
+    positions.iter().map(|p| seam.arc_of(p)).collect()
+}
+
+/// The polyline `points` smoothed across itself: each vertex moved to the mean of the
+/// `2·SMOOTHING_BINS + 1` vertices about it (the window shifted inside at the ends), keeping
+/// its own place along the line (its direction between the neighbouring vertices), so that the
+/// ends stay where they are.
+fn smoothed_across(points: &[Vec3]) -> Vec<Vec3> {
+    let n = points.len();
+    let width = (2 * SMOOTHING_BINS + 1).min(n);
+    (0..n)
+        .map(|k| {
+            let start = k.saturating_sub(SMOOTHING_BINS).min(n - width);
+            let mean = points[start..start + width].iter().sum::<Vec3>() / width as f64;
+            let direction = (points[(k + 1).min(n - 1)] - points[k.saturating_sub(1)])
+                .try_normalize(f64::MIN_POSITIVE)
+                .unwrap_or_else(Vec3::zeros);
+            mean + (points[k] - mean).dot(&direction) * direction
+        })
+        .collect()
+}
+
+/// For each point, the points within `link` mm of it and their distances.
+fn neighbours_within(positions: &[Vec3], link: f64) -> Vec<Vec<(usize, f64)>> {
+    let key = |p: &Vec3| p.map(|c| (c / link).floor() as i64);
+    let mut cells: std::collections::HashMap<[i64; 3], Vec<usize>> = Default::default();
+    for (i, p) in positions.iter().enumerate() {
+        let k = key(p);
+        cells.entry([k.x, k.y, k.z]).or_default().push(i);
+    }
+    (positions.iter().enumerate())
+        .map(|(i, p)| {
+            let k = key(p);
+            (0..27)
+                .filter_map(|d| {
+                    let o = [d % 3, (d / 3) % 3, d / 9].map(|o| o as i64 - 1);
+                    cells.get(&[k.x + o[0], k.y + o[1], k.z + o[2]])
+                })
+                .flatten()
+                .filter(|&&j| j != i)
+                .map(|&j| (j, (positions[j] - p).norm()))
+                .filter(|&(_, d)| d <= link)
+                .collect()
+        })
+        .collect()
+}
+
+/// Dijkstra's shortest distances from `source` over `neighbours` (infinite where unreached)
+/// and each point's previous point on its path.
+fn shortest_paths(neighbours: &[Vec<(usize, f64)>], source: usize) -> (Vec<f64>, Vec<usize>) {
+    use std::cmp::Reverse;
+    let mut distance = vec![f64::INFINITY; neighbours.len()];
+    let mut previous: Vec<usize> = (0..neighbours.len()).collect();
+    distance[source] = 0.0;
+    // Non-negative floats order as their bits.
+    let mut queue = std::collections::BinaryHeap::from([(Reverse(0u64), source)]);
+    while let Some((Reverse(bits), v)) = queue.pop() {
+        let d = f64::from_bits(bits);
+        if d > distance[v] {
+            continue;
+        }
+        for &(w, step) in &neighbours[v] {
+            if d + step < distance[w] {
+                distance[w] = d + step;
+                previous[w] = v;
+                queue.push((Reverse(distance[w].to_bits()), w));
+            }
+        }
+    }
+    (distance, previous)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -232,6 +357,26 @@ mod tests {
             assert!((r - (2.0 + p.z / 20.0)).abs() < 0.05, "{p} {r}");
         }
         assert!((even.distance(&Vec3::new(3.0, 4.0, 0.0)) - 5.0).abs() < 0.1);
+        // A half circle of radius 10 mm: followed round, not folded onto its diameter.
+        let arc: Vec<MedialPoint> = (0..=300)
+            .map(|i| {
+                let a = std::f64::consts::PI * i as f64 / 300.0;
+                MedialPoint {
+                    position: Vec3::new(10.0 * a.cos(), 10.0 * a.sin(), 0.0),
+                    radius: 2.0,
+                }
+            })
+            .collect();
+        let half_circle = Seam::fit(&arc, 0.5).unwrap();
+        let length = half_circle.length();
+        assert!(
+            (length - 10.0 * std::f64::consts::PI).abs() < 1.5,
+            "{length}"
+        );
+        assert!(half_circle
+            .points
+            .iter()
+            .all(|p| (p.xy().norm() - 10.0).abs() < 0.3 && p.z.abs() < 1e-9));
         // Points in one bin: no seam.
         let bunch = [points[0]; 5];
         assert!(Seam::fit(&bunch, 0.5).is_err());

@@ -64,10 +64,27 @@ pub fn stitch(sheets: &[MedialSheet], seams: &[Seam], cut: f64) -> Result<Medial
                 continue;
             };
             sheets_along[s] += 1;
-            let run: Vec<usize> = run.iter().map(|v| global[v]).collect();
-            let along_run = points[run[run.len() - 1]] - points[run[0]];
+            let mut run: Vec<usize> = run.iter().map(|v| global[v]).collect();
+            // A seam that curves round on itself (a septum's rim) has its ends near each
+            // other, and a run along it may pass from one end to the other: the run starts
+            // after its step in arc length over half the seam's length.
+            let arcs: Vec<f64> = run.iter().map(|&v| seam.arc_of(&points[v])).collect();
+            if let Some((k, step)) = (arcs.windows(2).map(|w| (w[1] - w[0]).abs()).enumerate())
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+            {
+                if step > 0.5 * seam.length() {
+                    run.rotate_left(k + 1);
+                }
+            }
+            // The seam runs the run's way when its ends lie nearer the run's ends that way
+            // than the other (a seam curved round on itself, as a ventricle's insertion
+            // lines are, has ends too near each other for a direction between them to tell).
+            let (start, end) = (points[run[0]], points[run[run.len() - 1]]);
+            let (first, last) = (seam.points[0], seam.points[seam.points.len() - 1]);
             let mut b = seam_vertices[s].clone();
-            if along_run.dot(&(seam.points[seam.points.len() - 1] - seam.points[0])) < 0.0 {
+            if (start - last).norm() + (end - first).norm()
+                < (start - first).norm() + (end - last).norm()
+            {
                 b.reverse();
             }
             zip(&run, &b, &points, &mut triangles);
