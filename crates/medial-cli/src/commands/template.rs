@@ -148,6 +148,16 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
     if let Some(why) = &built.fit_stopped_early {
         tracing::warn!("the fit to the shape stopped early, keeping its last sound iterate: {why}");
     }
+    let lowered = &built.figures.radius_lowered;
+    if !lowered.atoms.is_empty() {
+        tracing::warn!(
+            "the radius was lowered at {} atoms (to {:.0} % at least; `radius_lowered` lists them) \
+             where the boundary intersected itself; the template was fitted {} more times",
+            lowered.atoms.len(),
+            100.0 * lowered.least_factor,
+            lowered.refits
+        );
+    }
     if let Some(wanted) = built.figures.voxel_wanted_mm {
         tracing::info!(
             "the thinnest wall asks for {wanted:.3} mm voxels; the grid is {:.3} mm to stay within \

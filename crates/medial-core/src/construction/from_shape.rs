@@ -226,6 +226,8 @@ pub struct TemplateFigures {
     pub dice_before_fit: f64,
     /// Largest landmark move of the final projection, mm.
     pub final_projection_move_mm: f64,
+    /// Where the radius was lowered because the boundary intersected itself.
+    pub radius_lowered: RadiusLowered,
     /// The template's summary.
     pub summary: TemplateSummary,
 }
@@ -266,6 +268,12 @@ impl TemplateFigures {
 }
 
 /// Builds the template of `shape` (see the module doc) within `memory`.
+///
+/// Where the fitted template's boundary intersects itself (triangles that the flow carried
+/// across each other in a narrow wedge between sheets at a seam), the radius at the atoms of
+/// the triangles involved is lowered by [`SHRINK`] and the sheet inflated and fitted again, up
+/// to [`REFITS`] times: a start that can be made sound is not a failure. The figures say
+/// which atoms were lowered and by how much ([`RadiusLowered`]).
 pub fn template_of_shape(
     shape: &Shape,
     options: &TemplateOptions,
@@ -274,42 +282,112 @@ pub fn template_of_shape(
     shape.bounds()?;
     let (mask, voxel, wanted) = fine_mask(shape, options.voxel, memory)?;
     let found = sheet_of_mask(&mask, options.sampling)?;
-    let initial = inflated(&found.sheet).map_err(|e| match Fold::of(&found.sheet) {
-        Some(fold) => Error::InvalidTemplate(format!(
-            "the medial sheet folds by up to {:.0}° between neighbouring triangles at {} \
-             edges, the sharpest near ({:.1}, {:.1}, {:.1}) mm: the shape probably branches \
-             there (sheets meeting at a seam that was not found; {} seams found), and a folded \
-             sheet cannot be inflated ({e})",
-            fold.max_deg, fold.edges, fold.at.x, fold.at.y, fold.at.z, found.branching.seams
-        )),
-        None => e,
-    })?;
-    let dice_before_fit = voxel_dice(&initial.boundary_mesh()?, &mask)?;
-    let (fitted, fit_stopped_early) = if options.fit {
-        fit_to_shape(&initial, &mask, memory)?
-    } else {
-        (initial, None)
-    };
-    let projection = project(&fitted, &ProjectOptions::default())?;
-    let template = projection.template;
-    let figures = figures_of(
-        &template,
-        &found,
-        shape,
-        &mask,
-        [voxel, dice_before_fit, projection.max_displacement],
-    )?;
-    let figures = TemplateFigures {
-        voxel_wanted_mm: wanted,
-        ..figures
-    };
-    Ok(BuiltTemplate {
-        template,
-        found,
-        mask,
-        figures,
-        fit_stopped_early,
-    })
+    let subdivided = found.sheet.loop_subdivide()?;
+    let mut fine = subdivided.clone();
+    let mut refits = 0;
+    loop {
+        let (initial, inflated_sheet) =
+            inflated(fine).map_err(|e| match Fold::of(&found.sheet) {
+                Some(fold) => {
+                    Error::InvalidTemplate(format!(
+                "the medial sheet folds by up to {:.0}° between neighbouring triangles at {} \
+                 edges, the sharpest near ({:.1}, {:.1}, {:.1}) mm: the shape probably \
+                 branches there (sheets meeting at a seam that was not found; {} seams \
+                 found), and a folded sheet cannot be inflated ({e})",
+                fold.max_deg, fold.edges, fold.at.x, fold.at.y, fold.at.z, found.branching.seams
+            ))
+                }
+                None => e,
+            })?;
+        let dice_before_fit = voxel_dice(&initial.boundary_mesh()?, &mask)?;
+        let (fitted, fit_stopped_early) = if options.fit {
+            fit_to_shape(&initial, &mask, memory)?
+        } else {
+            (initial, None)
+        };
+        let projection = project(&fitted, &ProjectOptions::default())?;
+        let template = projection.template;
+        let pairs = self_intersections(&template.boundary_mesh()?);
+        if pairs.is_empty() || !options.fit || refits == REFITS {
+            let figures = figures_of(
+                &template,
+                &found,
+                shape,
+                &mask,
+                [voxel, dice_before_fit, projection.max_displacement],
+            )?;
+            let figures = TemplateFigures {
+                voxel_wanted_mm: wanted,
+                radius_lowered: RadiusLowered::between(&subdivided, &inflated_sheet, refits),
+                ..figures
+            };
+            return Ok(BuiltTemplate {
+                template,
+                found,
+                mask,
+                figures,
+                fit_stopped_early,
+            });
+        }
+        fine = lowered_where(&inflated_sheet, &template, &pairs)?;
+        refits += 1;
+    }
+}
+
+/// How many times at most the template is inflated and fitted again with the radius lowered
+/// where its fitted boundary intersects itself ([`template_of_shape`]).
+pub const REFITS: usize = 3;
+
+/// The factor the radius at an atom of intersecting boundary triangles is lowered by, each
+/// time: the inflation's own (`inflate::limit`), so that the lowering is as gradual as there.
+pub const SHRINK: f64 = 0.8;
+
+/// Where the radius of the sheet was lowered before the template was inflated from it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct RadiusLowered {
+    /// The atoms (vertices of the subdivided sheet) whose radius was lowered.
+    pub atoms: Vec<usize>,
+    /// The least ratio of a lowered radius to the sheet's own there.
+    pub least_factor: f64,
+    /// How many times the template was fitted again after lowering ([`REFITS`] at most).
+    pub refits: usize,
+}
+
+impl RadiusLowered {
+    /// The atoms where `lowered` has a smaller radius than `sheet` (the same sheet before
+    /// lowering), after `refits` fits again.
+    fn between(sheet: &MedialSheet, lowered: &MedialSheet, refits: usize) -> Self {
+        let ratios: Vec<(usize, f64)> = (sheet.radius().iter().zip(lowered.radius()))
+            .enumerate()
+            .filter(|(_, (r, l))| l < r)
+            .map(|(m, (r, l))| (m, l / r))
+            .collect();
+        Self {
+            atoms: ratios.iter().map(|&(m, _)| m).collect(),
+            least_factor: ratios.iter().map(|&(_, f)| f).fold(1.0, f64::min),
+            refits,
+        }
+    }
+}
+
+/// `sheet` with the radius lowered by [`SHRINK`] at the atoms of the boundary triangles of
+/// `template` (inflated from it) in the intersecting pairs `pairs`.
+fn lowered_where(
+    sheet: &MedialSheet,
+    template: &MedialTemplate,
+    pairs: &[(usize, usize)],
+) -> Result<MedialSheet> {
+    let boundary = template.boundary_mesh()?;
+    let atoms = template.medial_index();
+    let mut radius = sheet.radius().to_vec();
+    let involved: std::collections::BTreeSet<usize> = (pairs.iter())
+        .flat_map(|&(a, b)| [a, b])
+        .flat_map(|t| boundary.triangles()[t].map(|v| atoms[v]))
+        .collect();
+    for m in involved {
+        radius[m] *= SHRINK;
+    }
+    MedialSheet::new(sheet.points().to_vec(), sheet.triangles().to_vec(), radius)
 }
 
 /// The shape on its fine grid and that grid's voxel (mm): `voxel`, or a third of the
@@ -431,24 +509,15 @@ impl Fold {
     }
 }
 
-/// How many times at most the radius is lowered where the projected template's boundary
-/// intersects itself ([`inflated`]).
-const PROJECTED_SHRINK_ROUNDS: usize = 8;
-
-/// The factor the radius at such an atom is lowered by in each round: the inflation's own
-/// (`inflate::limit`), so that the lowering is as gradual as there.
-const PROJECTED_SHRINK: f64 = 0.8;
-
-/// The sheet Loop-subdivided once, inflated and projected onto its constraints. The
-/// inflation's boundary is free of self-intersections, but the projection moves spokes where
-/// sheets meet at a narrow angle at a seam (their spokes into the wedge between them then end
-/// close together): where the projected boundary intersects itself, the radius at the atoms of
-/// the triangles involved is lowered by [`PROJECTED_SHRINK`] and the sheet inflated and
-/// projected again, up to [`PROJECTED_SHRINK_ROUNDS`] times (the fit to the shape restores
-/// the thickness; a boundary still intersecting is reported by the verdict).
-fn inflated(sheet: &MedialSheet) -> Result<MedialTemplate> {
-    let mut fine = sheet.loop_subdivide()?;
-    for round in 0..=PROJECTED_SHRINK_ROUNDS {
+/// The subdivided sheet `fine` inflated and projected onto its constraints, with the sheet
+/// it was inflated from. The inflation's boundary is free of self-intersections, but the
+/// projection moves spokes where sheets meet at a narrow angle at a seam (their spokes into
+/// the wedge between them end close together): where the projected boundary intersects
+/// itself, the radius is lowered there ([`lowered_where`]) and the sheet inflated and projected
+/// again, up to [`REFITS`] times (the fit to the shape restores the thickness; a boundary still
+/// intersecting is reported by the verdict).
+fn inflated(mut fine: MedialSheet) -> Result<(MedialTemplate, MedialSheet)> {
+    for round in 0..=REFITS {
         let inflated = inflate(&fine)?;
         let template = MedialTemplate::new(
             inflated.boundary,
@@ -456,21 +525,11 @@ fn inflated(sheet: &MedialSheet) -> Result<MedialTemplate> {
             inflated.medial_points,
         )?;
         let projected = project(&template, &ProjectOptions::default())?.template;
-        let boundary = projected.boundary_mesh()?;
-        let pairs = self_intersections(&boundary);
-        if pairs.is_empty() || round == PROJECTED_SHRINK_ROUNDS {
-            return Ok(projected);
+        let pairs = self_intersections(&projected.boundary_mesh()?);
+        if pairs.is_empty() || round == REFITS {
+            return Ok((projected, fine));
         }
-        let atoms = projected.medial_index();
-        let mut radius = fine.radius().to_vec();
-        let involved: std::collections::BTreeSet<usize> = (pairs.iter())
-            .flat_map(|&(a, b)| [a, b])
-            .flat_map(|t| boundary.triangles()[t].map(|v| atoms[v]))
-            .collect();
-        for &m in &involved {
-            radius[m] *= PROJECTED_SHRINK;
-        }
-        fine = MedialSheet::new(fine.points().to_vec(), fine.triangles().to_vec(), radius)?;
+        fine = lowered_where(&fine, &projected, &pairs)?;
     }
     unreachable!("the last round returns")
 }
@@ -605,6 +664,7 @@ fn figures_of(
         self_intersection_free,
         dice_before_fit,
         final_projection_move_mm: moved,
+        radius_lowered: RadiusLowered::default(),
         summary,
     })
 }
@@ -703,8 +763,27 @@ mod tests {
             self_intersection_free: sound[2],
             dice_before_fit: 0.0,
             final_projection_move_mm: 0.0,
+            radius_lowered: RadiusLowered::default(),
             summary: TemplateSummary::default(),
         }
+    }
+
+    #[test]
+    fn the_lowered_radii_are_listed_with_their_least_factor() {
+        let sheet = creased(30.0);
+        let mut radius = sheet.radius().to_vec();
+        radius[2] *= SHRINK;
+        radius[4] *= SHRINK * SHRINK;
+        let lowered =
+            MedialSheet::new(sheet.points().to_vec(), sheet.triangles().to_vec(), radius).unwrap();
+        let found = RadiusLowered::between(&sheet, &lowered, 2);
+        assert_eq!(found.atoms, vec![2, 4]);
+        assert!((found.least_factor - 0.64).abs() < 1e-12, "{found:?}");
+        assert_eq!(found.refits, 2);
+        assert_eq!(
+            RadiusLowered::between(&sheet, &sheet, 0).atoms,
+            Vec::<usize>::new()
+        );
     }
 
     #[test]
