@@ -11,6 +11,7 @@ use medial_core::construction::from_shape::{
 };
 use medial_core::construction::Sampling;
 use medial_io::nifti_volume::{write_nifti, NiftiType};
+use medial_io::vtk::{write_polydata, DataArray, ValueType};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -167,7 +168,16 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
     }
     // Nothing is written before everything has been computed, so that a failure leaves no
     // half-written output.
-    medial_io::cmrep::write_template(&args.out, &built.template, write_options(args.binary))?;
+    // The template as cmrep writes it, with the sheet of each boundary point's atom (`Sheet`,
+    // −1 on a seam): a wall per colour in ParaView, and per-wall figures in a study.
+    let mut data = medial_io::cmrep::template_to_polydata(&built.template);
+    let sheet_of = |b: &usize| built.atom_sheet[*b].map_or(-1.0, |k| k as f64);
+    data.point_data.push(DataArray::scalars(
+        "Sheet",
+        built.template.medial_index().iter().map(sheet_of).collect(),
+        ValueType::Int,
+    ));
+    write_polydata(&args.out, &data, write_options(args.binary))?;
     if let Some(path) = &args.sheet {
         medial_io::sheet::write_sheet(path, &built.found.sheet, write_options(args.binary))?;
     }

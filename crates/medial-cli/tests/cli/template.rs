@@ -170,6 +170,27 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
             .filter(|&m| template.spokes(m).len() == 3)
             .count();
         assert_eq!(three as u64, by_spokes[2]);
+        // Its `Sheet` point array: the wall of each boundary point's atom, −1 on the seam
+        // (every atom of three spokes), each of the three sheets present.
+        let data = medial_io::vtk::read_polydata(&out).unwrap();
+        let sheet_of = &data.point_array_ci("Sheet").expect("a Sheet array").values;
+        let mut walls = std::collections::BTreeSet::new();
+        for (b, &m) in template.medial_index().iter().enumerate() {
+            if template.spokes(m).len() == 3 {
+                assert_eq!(
+                    sheet_of[b], -1.0,
+                    "{name}: seam atom {m} labelled {}",
+                    sheet_of[b]
+                );
+            } else if sheet_of[b] >= 0.0 {
+                walls.insert(sheet_of[b] as i64);
+            }
+        }
+        assert_eq!(
+            walls.into_iter().collect::<Vec<_>>(),
+            vec![0, 1, 2],
+            "{name}"
+        );
         let boundary = template.boundary_mesh().unwrap();
         check_closed_oriented_manifold(&boundary).expect("closed, manifold");
         check_outward(&boundary).expect("outward");

@@ -174,6 +174,8 @@ pub struct BuiltTemplate {
     /// A fit to the shape that stopped where the model would fold: its last sound iterate was
     /// kept (the figures say whether it meets the targets).
     pub fit_stopped_early: Option<String>,
+    /// The sheet of each atom (`0 .. sheets`, as in the figures' lists), `None` on a seam.
+    pub atom_sheet: Vec<Option<usize>>,
 }
 
 /// The figures of a template built from a shape.
@@ -322,6 +324,7 @@ pub fn template_of_shape(
                 ..figures
             };
             return Ok(BuiltTemplate {
+                atom_sheet: found.sheet.subdivided_labels(&found.sheet_of_point),
                 template,
                 found,
                 mask,

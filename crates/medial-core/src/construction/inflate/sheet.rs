@@ -86,6 +86,26 @@ impl MedialSheet {
         Self::new(points, triangles, radius)
     }
 
+    /// The labels of the points after one Loop subdivision ([`Self::loop_subdivide`]), from
+    /// `labels`, one per point (a sheet, `None` on a seam): a vertex keeps its own; an edge's
+    /// new point takes its ends' label where they agree or one of them is `None` (an edge from
+    /// a seam into a sheet), `None` otherwise (an edge along a seam).
+    pub fn subdivided_labels(&self, labels: &[Option<usize>]) -> Vec<Option<usize>> {
+        let edges = Edges::new(self.triangles());
+        let mut subdivided = labels.to_vec();
+        subdivided.extend(
+            edges
+                .ends
+                .iter()
+                .map(|&(a, b)| match (labels[a], labels[b]) {
+                    (Some(k), Some(j)) if k == j => Some(k),
+                    (Some(k), None) | (None, Some(k)) => Some(k),
+                    _ => None,
+                }),
+        );
+        subdivided
+    }
+
     /// The medial points (mm).
     pub fn points(&self) -> &[Vec3] {
         self.mesh.points()
@@ -186,4 +206,38 @@ pub(super) fn vertex_stencil(
 
 pub(super) fn combine(stencil: &[(usize, f64)], points: &[Vec3]) -> Vec3 {
     stencil.iter().map(|&(i, w)| w * points[i]).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_subdivided_point_takes_its_edge_s_sheet_and_a_seam_edge_stays_on_the_seam() {
+        // Two triangles of sheets 0 and 1 sharing the edge 0–1, which lies on a seam.
+        let points = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.5, 1.0, 0.0),
+            Vec3::new(0.5, -1.0, 0.5),
+        ];
+        let sheet = MedialSheet::new(points, vec![[0, 1, 2], [1, 0, 3]], vec![0.1; 4]).unwrap();
+        let labels = sheet.subdivided_labels(&[None, None, Some(0), Some(1)]);
+        let subdivided = sheet.loop_subdivide().unwrap();
+        assert_eq!(labels.len(), subdivided.points().len());
+        assert_eq!(&labels[..4], &[None, None, Some(0), Some(1)]);
+        // Each edge's new point, found by where it lies: the middle of its ends, give or take
+        // the Loop weights.
+        let near = |p: Vec3| {
+            (4..labels.len())
+                .min_by(|&a, &b| {
+                    let d = |i: usize| (subdivided.points()[i] - p).norm();
+                    d(a).total_cmp(&d(b))
+                })
+                .unwrap()
+        };
+        assert_eq!(labels[near(Vec3::new(0.5, 0.0, 0.0))], None);
+        assert_eq!(labels[near(Vec3::new(0.25, 0.5, 0.0))], Some(0));
+        assert_eq!(labels[near(Vec3::new(0.75, -0.5, 0.25))], Some(1));
+    }
 }

@@ -123,6 +123,9 @@ pub struct ShapeSheet {
     pub seams: Vec<Seam>,
     /// The sheets and seams of the medial points.
     pub branching: Branching,
+    /// The sheet (`0 .. sheets`, in the order of `lattices`) of each of the sheet's points;
+    /// `None` on a seam.
+    pub sheet_of_point: Vec<Option<usize>>,
 }
 
 /// The medial sheet of the shape `mask` (voxels > ½ inside, on a grid with orthogonal axes and
@@ -167,6 +170,7 @@ pub fn sheet_of_points(
     let (rings, stretch) = lattice_of(sampling, first.area(), first.elongation())?;
     let built = charted.sampled(rings, stretch)?;
     Ok(ShapeSheet {
+        sheet_of_point: vec![Some(0); built.sheet.points().len()],
         sheet: built.sheet,
         spur_free_points: built.spur_free_points,
         medial_points: points,
@@ -233,6 +237,7 @@ fn several_sheets(
         }
     }
     Ok(ShapeSheet {
+        sheet_of_point: best.sheet_of_point,
         border: free_edge_points(&best.sheet),
         sheet: best.sheet,
         spur_free_points: best.built.iter().map(|b| b.spur_free_points).sum(),
@@ -253,6 +258,7 @@ const COUNT_SLACK: f64 = 0.1;
 /// The sheets of a branching shape sampled at one spacing and stitched along its seams.
 struct Stitched {
     sheet: MedialSheet,
+    sheet_of_point: Vec<Option<usize>>,
     built: Vec<SampledSheet>,
     seams: Vec<Seam>,
 }
@@ -284,9 +290,10 @@ impl Stitched {
                 clipped(seam, &along, REACH_SPACINGS * lattice_spacing).resampled(lattice_spacing)
             })
             .collect();
-        let sheet = stitch(&sheets, &seams, CUT_SPACINGS * lattice_spacing)?;
+        let (sheet, sheet_of_point) = stitch(&sheets, &seams, CUT_SPACINGS * lattice_spacing)?;
         Ok(Self {
             sheet,
+            sheet_of_point,
             built,
             seams,
         })

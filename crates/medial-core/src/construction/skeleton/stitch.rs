@@ -35,12 +35,19 @@ pub const CUT_RADII: f64 = 1.6;
 /// `s`, zipped to `s` ([`zip`]). Then the ears are dropped (`drop_ears`) and the points no
 /// triangle uses (the order of the others kept).
 ///
+/// With the stitched sheet, the sheet of each of its points (`None` on a seam).
+///
 /// Errors: `InvalidVolume` when a sheet's free edges do not form simple loops after the cut
 /// (it fell apart) or a seam has no sheet along it; those of [`MedialSheet::new`] (an edge in
 /// more than three triangles: more than three sheets at a seam).
-pub fn stitch(sheets: &[MedialSheet], seams: &[Seam], cut: f64) -> Result<MedialSheet> {
+pub fn stitch(
+    sheets: &[MedialSheet],
+    seams: &[Seam],
+    cut: f64,
+) -> Result<(MedialSheet, Vec<Option<usize>>)> {
     let mut points: Vec<Vec3> = seams.iter().flat_map(|s| s.points.clone()).collect();
     let mut radius: Vec<f64> = seams.iter().flat_map(|s| s.radius.clone()).collect();
+    let mut label: Vec<Option<usize>> = vec![None; points.len()];
     let mut first = vec![0];
     for s in seams {
         first.push(first[first.len() - 1] + s.points.len());
@@ -50,7 +57,7 @@ pub fn stitch(sheets: &[MedialSheet], seams: &[Seam], cut: f64) -> Result<Medial
         .collect();
     let mut triangles = Vec::new();
     let mut sheets_along = vec![0; seams.len()];
-    for sheet in sheets {
+    for (k, sheet) in sheets.iter().enumerate() {
         let cut_sheet = CutSheet::new(sheet, seams, cut)?;
         let offset = points.len();
         let global: HashMap<usize, usize> = (cut_sheet.used.iter().enumerate())
@@ -58,6 +65,7 @@ pub fn stitch(sheets: &[MedialSheet], seams: &[Seam], cut: f64) -> Result<Medial
             .collect();
         points.extend(cut_sheet.used.iter().map(|&v| sheet.points()[v]));
         radius.extend(cut_sheet.used.iter().map(|&v| sheet.radius()[v]));
+        label.extend(cut_sheet.used.iter().map(|_| Some(k)));
         triangles.extend(cut_sheet.triangles.iter().map(|t| t.map(|v| global[&v])));
         for (s, seam) in seams.iter().enumerate() {
             let Some(run) = cut_sheet.run_along(s, sheet, seams) else {
@@ -96,8 +104,13 @@ pub fn stitch(sheets: &[MedialSheet], seams: &[Seam], cut: f64) -> Result<Medial
         )));
     }
     drop_ears(&mut triangles);
-    let (points, triangles, radius) = used_only(points, &triangles, radius);
-    MedialSheet::new(points, triangles, radius)
+    let (kept, triangles) = used_only(points.len(), &triangles);
+    let sheet = MedialSheet::new(
+        kept.iter().map(|&v| points[v]).collect(),
+        triangles,
+        kept.iter().map(|&v| radius[v]).collect(),
+    )?;
+    Ok((sheet, kept.iter().map(|&v| label[v]).collect()))
 }
 
 /// Drops the triangles with two or three free edges (ears: inflation refuses them, their
@@ -118,25 +131,15 @@ fn drop_ears(triangles: &mut Vec<[usize; 3]>) {
     }
 }
 
-/// The points (and radii) that `triangles` use, in their order, and the triangles renumbered.
-fn used_only(
-    points: Vec<Vec3>,
-    triangles: &[[usize; 3]],
-    radius: Vec<f64>,
-) -> (Vec<Vec3>, Vec<[usize; 3]>, Vec<f64>) {
-    let mut used = vec![false; points.len()];
+/// The points that `triangles` use, ascending, and the triangles renumbered into them.
+fn used_only(count: usize, triangles: &[[usize; 3]]) -> (Vec<usize>, Vec<[usize; 3]>) {
+    let mut used = vec![false; count];
     triangles.iter().flatten().for_each(|&v| used[v] = true);
-    let mut number = vec![0; points.len()];
-    let mut next = 0;
-    for (v, &u) in used.iter().enumerate() {
-        number[v] = next;
-        next += usize::from(u);
-    }
-    let keep = |v: &usize| used[*v];
-    let points = (0..points.len()).filter(keep).map(|v| points[v]).collect();
-    let radius = (0..radius.len()).filter(keep).map(|v| radius[v]).collect();
+    let kept: Vec<usize> = (0..count).filter(|&v| used[v]).collect();
+    let mut number = vec![0; count];
+    kept.iter().enumerate().for_each(|(k, &v)| number[v] = k);
     let triangles = triangles.iter().map(|t| t.map(|v| number[v])).collect();
-    (points, triangles, radius)
+    (kept, triangles)
 }
 
 /// Triangulates the band between the cut `a` (a run of a sheet's free edge, in the direction
@@ -348,7 +351,8 @@ mod tests {
     #[test]
     fn three_fins_stitched_share_every_seam_edge_and_keep_their_orientation() {
         let (sheets, seam) = fins(3, 0.3, 1.0);
-        let stitched = stitch(&sheets, std::slice::from_ref(&seam), 0.5).unwrap();
+        let (stitched, label) = stitch(&sheets, std::slice::from_ref(&seam), 0.5).unwrap();
+        assert_eq!(label.len(), stitched.points().len());
         check_stitched(&stitched, &seam);
         // No vertex within the cut of the seam but the seam's, and the result inflates.
         for p in &stitched.points()[seam.points.len()..] {
@@ -362,7 +366,8 @@ mod tests {
         // A seam of radius 2.6: the cut at 4.16 mm leaves each fin's two outer rows (4.76 and
         // 5.63 mm out), whose cut edges are free until zipped.
         let (sheets, seam) = fins(4, 1.3, 2.6);
-        let stitched = stitch(&sheets, std::slice::from_ref(&seam), 0.5).unwrap();
+        let (stitched, label) = stitch(&sheets, std::slice::from_ref(&seam), 0.5).unwrap();
+        assert_eq!(label.len(), stitched.points().len());
         check_stitched(&stitched, &seam);
         let kept: usize = (sheets.iter())
             .map(|s| {
