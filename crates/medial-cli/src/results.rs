@@ -324,6 +324,38 @@ pub fn verify(dir: &Path, marker: &str, skip: impl Fn(&str) -> bool) -> Result<(
     Ok(())
 }
 
+/// Refuses `out` as the output folder of `medial COMMAND` (whose summary.json records
+/// `"command": COMMAND`) when it holds another command's results, which this one's files
+/// (summary.json, report.html, …) would overwrite: a batch folder (`cohort.csv`) or a
+/// summary.json that is not this command's (a fit's or a report's result set, or another
+/// analysis). A folder of this command's own results is written over, as a re-run expects.
+pub fn refuse_other_results(out: &Path, command: &str) -> Result<(), CliError> {
+    let refuse = |what: &str| {
+        CliError::Input(format!(
+            "{}: holds {what}, which `medial {command}` would overwrite: give another --out",
+            out.display()
+        ))
+    };
+    if out.join("cohort.csv").is_file() {
+        return Err(refuse("a `medial batch` folder's results (cohort.csv)"));
+    }
+    let Ok(bytes) = std::fs::read(out.join("summary.json")) else {
+        return Ok(());
+    };
+    let written_by = serde_json::from_slice::<serde_json::Value>(&bytes)
+        .ok()
+        .and_then(|v| v.get("command").and_then(|c| c.as_str()).map(str::to_owned));
+    match written_by {
+        Some(c) if c == command => Ok(()),
+        Some(c) => Err(refuse(&format!(
+            "the results of `medial {c}` (summary.json)"
+        ))),
+        None => Err(refuse(
+            "another command's results (summary.json, a fit's or a report's)",
+        )),
+    }
+}
+
 /// Whether a symbolic link can be made in `folder` (tried and removed).
 fn makes_links(folder: &Path) -> bool {
     let probe = folder.join(format!(

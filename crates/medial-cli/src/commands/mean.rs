@@ -61,6 +61,8 @@ struct Round {
 /// What `medial mean` prints and writes as summary.json.
 #[derive(Serialize)]
 struct Summary {
+    /// `mean`: what wrote the folder ([`crate::results::refuse_other_results`]).
+    command: &'static str,
     template: PathBuf,
     alignment: &'static str,
     tolerance_mm: f64,
@@ -72,6 +74,7 @@ struct Summary {
 /// Runs the rounds, writes the templates, DIR/rounds.csv and DIR/summary.json, prints the
 /// summary.
 pub fn run(args: &MeanArgs, threads: usize, quiet: bool) -> Result<(), CliError> {
+    crate::results::refuse_other_results(&args.out, "mean")?;
     if !(args.tolerance >= 0.0 && args.tolerance.is_finite()) {
         return Err(CliError::Usage(format!(
             "--tolerance {}: expected a distance in mm, 0 or more",
@@ -144,6 +147,7 @@ pub fn run(args: &MeanArgs, threads: usize, quiet: bool) -> Result<(), CliError>
     }
     write_text(&args.out.join("rounds.csv"), &table)?;
     let summary = Summary {
+        command: "mean",
         template: args.template.clone(),
         alignment: args.align.name(),
         tolerance_mm: args.tolerance,

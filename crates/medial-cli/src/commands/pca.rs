@@ -42,6 +42,8 @@ const FRAMES_SD: [f64; 9] = [-2.0, -1.5, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0];
 /// What `medial pca` prints and writes as summary.json.
 #[derive(Serialize)]
 struct Summary {
+    /// `pca`: what wrote the folder ([`crate::results::refuse_other_results`]).
+    command: &'static str,
     input: PathBuf,
     of: &'static str,
     alignment: &'static str,
@@ -163,6 +165,7 @@ impl Meshes {
 /// as the animation DIR/modeK.glb, DIR/report.html, and
 /// DIR/summary.json; prints the summary.
 pub fn run(args: &PcaArgs) -> Result<(), CliError> {
+    crate::results::refuse_other_results(&args.out, "pca")?;
     if args.modes == 0 {
         return Err(CliError::Usage("--modes 0: write at least one mode".into()));
     }
@@ -253,6 +256,7 @@ pub fn run(args: &PcaArgs) -> Result<(), CliError> {
     )?;
     write_text(&args.out.join("report.html"), &page)?;
     let summary = Summary {
+        command: "pca",
         input: args.input.clone(),
         of: args.of.name(),
         alignment: args.align.name(),

@@ -374,3 +374,69 @@ fn a_design_whose_subjects_all_failed_has_nothing_to_test() {
         &["only.csv", "none of its subjects has data to test"],
     );
 }
+
+/// The arguments as `&str`s.
+fn args(v: &[String]) -> Vec<&str> {
+    v.iter().map(String::as_str).collect()
+}
+
+#[test]
+fn stats_refuses_a_damaged_subject_file_and_an_output_folder_of_other_results() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (input, _) = cohort(d);
+    // Subjects whose fits are all usable (no note on stderr before the error).
+    let groups = d.join("groups.csv");
+    std::fs::write(
+        &groups,
+        "subject,group\na1,a\na2,a\na3,a\nb1,b\nb2,b\nb3,b\n",
+    )
+    .unwrap();
+    let stats = |out: &Path| {
+        vec![
+            "stats".to_owned(),
+            s(&input).to_owned(),
+            "--design".to_owned(),
+            s(&groups).to_owned(),
+            "--contrast".to_owned(),
+            "group[b]".to_owned(),
+            "--permutations".to_owned(),
+            "50".to_owned(),
+            "--out".to_owned(),
+            s(out).to_owned(),
+        ]
+    };
+    // A subject's fitted model whose bytes differ from the digest its fit recorded.
+    let marker = input.join("a1").join("summary.json");
+    std::fs::write(&marker, r#"{"sha256": {"fitted_template.vtk": "00"}}"#).unwrap();
+    let line = one_line_error(
+        &args(&stats(&d.join("st"))),
+        1,
+        &["fitted_template.vtk", "SHA-256"],
+    );
+    assert!(line.contains("a1"), "{line}");
+    std::fs::remove_file(&marker).unwrap();
+    // A fit's folder and a batch folder are not overwritten; the fit's summary stays.
+    let fit = d.join("fit");
+    std::fs::create_dir_all(&fit).unwrap();
+    let summary = r#"{"version": "0", "status": "converged", "files": []}"#;
+    std::fs::write(fit.join("summary.json"), summary).unwrap();
+    one_line_error(
+        &args(&stats(&fit)),
+        1,
+        &["would overwrite", "another --out"],
+    );
+    assert_eq!(
+        std::fs::read_to_string(fit.join("summary.json")).unwrap(),
+        summary
+    );
+    one_line_error(&args(&stats(&input)), 1, &["cohort.csv", "would overwrite"]);
+    // Its own folder is written over.
+    for _ in 0..2 {
+        let o = medial(&args(&stats(&d.join("st"))));
+        assert!(o.status.success(), "{}", text(&o.stderr));
+    }
+    let written: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("st").join("summary.json")).unwrap()).unwrap();
+    assert_eq!(written["command"], "stats");
+}

@@ -113,6 +113,7 @@ impl Cohort {
 
     /// The fitted model of subject `name` (`fitted_template.vtk`, the model at t = 1).
     pub fn fitted(&self, name: &str) -> Result<MedialTemplate, CliError> {
+        self.verified(name, "fitted_template.vtk")?;
         medial_template(&self.subject_dir(name).join("fitted_template.vtk"))
     }
 
@@ -156,6 +157,12 @@ impl Cohort {
         Ok((path.clone(), medial_template(&path)?))
     }
 
+    /// Refuses subject `name`'s result file `file` when its bytes differ from the SHA-256
+    /// its fit's summary.json records ([`crate::results::verify`]).
+    fn verified(&self, name: &str, file: &str) -> Result<(), CliError> {
+        crate::results::verify(&self.subject_dir(name), "summary.json", |r| r != file)
+    }
+
     /// The column `column` of subject `name`'s `atoms.csv`, one value per atom (`atoms` of
     /// them); empty cells and `NaN` are missing values.
     pub fn atoms_column(
@@ -164,6 +171,7 @@ impl Cohort {
         column: &str,
         atoms: usize,
     ) -> Result<Vec<f64>, CliError> {
+        self.verified(name, "atoms.csv")?;
         let path = self.subject_dir(name).join("atoms.csv");
         let bad = |m: String| CliError::Input(format!("{}: {m}", path.display()));
         let mut table = csv::Reader::from_path(&path).map_err(|e| bad(e.to_string()))?;

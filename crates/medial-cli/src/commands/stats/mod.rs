@@ -167,6 +167,8 @@ fn read_contrast(spec: &str, design: &Design) -> Result<Contrast, CliError> {
 /// What `medial stats` prints and writes as summary.json.
 #[derive(Serialize)]
 struct Summary {
+    /// `stats`: what wrote the folder ([`crate::results::refuse_other_results`]).
+    command: &'static str,
     input: PathBuf,
     #[serde(flatten)]
     source: Source,
@@ -510,6 +512,7 @@ fn prepare_cohort(args: &StatsArgs) -> Result<Prepared, CliError> {
 /// and DIR/summary.json (with several contrasts, each one's files in DIR/K_NAME/), prints the
 /// summary.
 pub fn run(args: &StatsArgs) -> Result<(), CliError> {
+    crate::results::refuse_other_results(&args.out, "stats")?;
     let input = if args.input.is_dir() {
         if !Cohort::is_cohort(&args.input) {
             return Err(CliError::Input(format!(
@@ -665,6 +668,7 @@ pub fn run(args: &StatsArgs) -> Result<(), CliError> {
     )?;
     write_text(&args.out.join("report.html"), &page)?;
     let summary = Summary {
+        command: "stats",
         input: args.input.clone(),
         source: input.source,
         array: input.array,
