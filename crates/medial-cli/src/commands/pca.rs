@@ -34,6 +34,10 @@ pub struct PcaArgs {
     /// rigid, or none (the models as fitted).
     #[arg(long, value_name = "HOW", default_value = "similarity")]
     pub align: Alignment,
+    /// Only these subjects (names as in cohort.csv, comma-separated) [default: every subject
+    /// whose fit is usable].
+    #[arg(long, value_name = "A,B", value_delimiter = ',')]
+    pub subjects: Option<Vec<String>>,
 }
 
 /// The standard deviations of the frames of each mode's series.
@@ -159,6 +163,25 @@ impl Meshes {
     }
 }
 
+/// The usable subjects of `cohort` and those left out, among `--subjects` when given (each of
+/// which must be a subject of the cohort).
+fn chosen<'a>(
+    cohort: &'a Cohort,
+    args: &PcaArgs,
+) -> Result<(Vec<&'a str>, Vec<LeftOut>), CliError> {
+    let Some(wanted) = &args.subjects else {
+        return Ok(cohort.usable());
+    };
+    let candidates = cohort.candidates();
+    if let Some(unknown) = (wanted.iter()).find(|w| !candidates.iter().any(|c| c.name == *w)) {
+        return Err(CliError::Input(format!(
+            "--subjects: no subject '{unknown}' in {}",
+            args.input.join("cohort.csv").display()
+        )));
+    }
+    Ok(cohort.usable_of(|name| wanted.iter().any(|w| w == name)))
+}
+
 /// Reads the cohort, computes its modes, writes DIR/modes.csv, DIR/scores.csv,
 /// DIR/mean_boundary.vtk (and mean_medial.vtk), each mode's ±2 SD shapes as
 /// DIR/modeK_boundary.vtk.series (and modeK_medial.vtk.series) of the frames in DIR/modeK/ and
@@ -170,7 +193,7 @@ pub fn run(args: &PcaArgs) -> Result<(), CliError> {
         return Err(CliError::Usage("--modes 0: write at least one mode".into()));
     }
     let cohort = Cohort::read(&args.input)?;
-    let (names, left_out) = cohort.usable();
+    let (names, left_out) = chosen(&cohort, args)?;
     let models = names
         .iter()
         .map(|name| cohort.fitted(name))

@@ -259,4 +259,33 @@ fn bad_pca_inputs_are_one_line_errors() {
         &["--modes 0"],
     );
     one_line_error(&["pca", s(d), "--out", s(&out)], 1, &["cohort.csv"]);
+    one_line_error(
+        &["pca", s(&input), "--out", s(&out), "--subjects", "s0,zz"],
+        1,
+        &["--subjects: no subject 'zz'"],
+    );
+}
+
+#[test]
+fn pca_takes_the_subjects_it_is_given() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let template = toy();
+    let subjects: Vec<(String, MedialTemplate)> = (0..N)
+        .map(|i| (format!("s{i}"), subject(&template, i, 0.15)))
+        .collect();
+    let input = write_cohort(d, &subjects);
+    let out = d.join("pca");
+    let summary = run_json(&[
+        "pca",
+        s(&input),
+        "--out",
+        s(&out),
+        "--subjects",
+        "s0,s2,s3,gone",
+    ]);
+    assert_eq!(summary["subjects"], serde_json::json!(["s0", "s2", "s3"]));
+    assert_eq!(summary["left_out"][0]["subject"], "gone");
+    let scores = std::fs::read_to_string(out.join("scores.csv")).unwrap();
+    assert_eq!(scores.lines().count(), 1 + 3, "{scores}");
 }

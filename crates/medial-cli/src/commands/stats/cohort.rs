@@ -95,9 +95,14 @@ impl Cohort {
 
     /// The usable subjects in the table's order, and the others (each noted on stderr).
     pub fn usable(&self) -> (Vec<&str>, Vec<LeftOut>) {
+        self.usable_of(|_| true)
+    }
+
+    /// [`Self::usable`] among the subjects `keep` takes.
+    pub fn usable_of(&self, keep: impl Fn(&str) -> bool) -> (Vec<&str>, Vec<LeftOut>) {
         let mut usable = Vec::new();
         let mut left_out = Vec::new();
-        for c in self.candidates() {
+        for c in self.candidates().into_iter().filter(|c| keep(c.name)) {
             match c.unusable {
                 None => usable.push(c.name),
                 Some(why) => left_out.push(LeftOut::noted(c.name.into(), why.into())),

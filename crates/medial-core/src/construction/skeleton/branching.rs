@@ -73,7 +73,7 @@ impl Branches {
 /// The [`Branches`] of the medial points `points` of a mask of mean voxel `voxel` (mm).
 ///
 /// 1. A point is on a seam when the points within its ball (radius `b = max(4·voxel, r)`,
-///    `r` the point's radius: [`BALL_VOXELS`], [`BALL_RADII`]) are not flat: the smallest
+///    `r` the point's radius: `BALL_VOXELS`, `BALL_RADII`) are not flat: the smallest
 ///    eigenvalue of their covariance is at least 0.1 of the trace (`SEAM_FLATNESS`).
 /// 2. The seam points form seams (joined when each lies in the other's ball) and the other
 ///    points, less those in the ball of a seam point, form pieces of sheet (cells of

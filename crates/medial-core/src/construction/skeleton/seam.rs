@@ -213,7 +213,7 @@ const LINKS_VOXELS: [f64; 5] = [2.0, 4.0, 8.0, 16.0, 32.0];
 /// The arc parameter of each of a seam's points `positions` (mm, on a mask of mean voxel
 /// `voxel`): the arc length of its nearest point on the seam's spine, the shortest path
 /// between its two ends over the graph joining points at most a link apart (the first of
-/// [`LINKS_VOXELS`] that joins them all, or the piece of the first point at the widest), the
+/// `LINKS_VOXELS` that joins them all, or the piece of the first point at the widest), the
 /// ends being the point farthest from the first point and the point farthest from that one.
 /// Along a line of points, straight or curved, it grows as the arc length, where a projection
 /// onto one direction folds a curved line over itself.
