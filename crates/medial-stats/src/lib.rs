@@ -48,7 +48,7 @@ pub use design::{Candidate, Design, Matched, TableOptions};
 pub use error::{Result, StatsError};
 pub use fdr::q_values;
 pub use glm::{Glm, GlmOptions, Observations, Tail};
-pub use mean::{mean_template, MeanTemplate};
+pub use mean::{mean_template, normal_and_tangential, MeanTemplate};
 pub use mesh::{
     cluster_outlines, diffusion_time, find_clusters, smooth, tfce, Cluster, Clusters, Elements,
     Mesh, Support, TfceParameters,

@@ -4,8 +4,11 @@
 //! projected onto the medial constraints
 //! ([`medial_core::construction::project()`]) so that they hold within its tolerances. The
 //! change of the round is the root-mean-square move of the landmarks from the round's template
-//! to the new one; rounds (each fitting the cohort again from the new template) repeat until it
-//! is small.
+//! to the new one, and its parts along the round's boundary normals (the shape change) and
+//! across them (the slide); rounds (each fitting the cohort again from the new template) repeat
+//! until the shape change is small. A Dice fit ties the surface to the image, not a boundary
+//! point to its place on the surface: every round's fits re-place the points along the surface
+//! a little, a slide that shrinks slowly while the shape has stopped changing (decision 0102).
 
 use medial_core::construction::project::{project, ConstraintFigures, ProjectOptions};
 use medial_core::{MedialTemplate, Vec3};
@@ -21,6 +24,13 @@ pub struct MeanTemplate {
     pub template: MedialTemplate,
     /// Root-mean-square landmark move from the round's template, mm.
     pub change: f64,
+    /// Root-mean-square over the boundary points of their move along the round's template's
+    /// outward boundary normals (its Loop normals), mm: to first order the distance between
+    /// the two surfaces, the change of shape.
+    pub shape_change: f64,
+    /// Root-mean-square over the boundary points of the rest of their move (along the
+    /// surface), mm: how the points slid on it.
+    pub slide: f64,
     /// The constraints of the mean before projection.
     pub before: ConstraintFigures,
     /// The constraints of the projected mean.
@@ -88,11 +98,31 @@ pub fn mean_template(
         .zip(reference.landmarks())
         .map(|(a, b)| (a - b).norm_squared())
         .sum();
+    let (shape_change, slide) = normal_and_tangential(reference, projection.template.landmarks());
     Ok(MeanTemplate {
         change: (moved / reference.landmark_count() as f64).sqrt(),
+        shape_change,
+        slide,
         before: projection.before,
         after: projection.after,
         projection_rms: projection.rms_displacement,
         template: projection.template,
     })
+}
+
+/// The root-mean-square over `reference`'s boundary points of their move to `moved` (landmarks
+/// of the same structure) along `reference`'s outward Loop normals there, and across them, mm.
+pub fn normal_and_tangential(reference: &MedialTemplate, moved: &[Vec3]) -> (f64, f64) {
+    let q = reference.landmarks();
+    let normals = reference.tangents().normals(q);
+    let nb = reference.boundary_count();
+    let (normal, tangential) = (0..nb).fold((0.0, 0.0), |(n, t), b| {
+        let d = moved[b] - q[b];
+        let along = d.dot(&normals[b]);
+        (
+            n + along * along,
+            t + (d - along * normals[b]).norm_squared(),
+        )
+    });
+    ((normal / nb as f64).sqrt(), (tangential / nb as f64).sqrt())
 }

@@ -64,7 +64,15 @@ fn mean_rounds_fit_from_the_last_mean_and_approach_the_unbent_toy() {
     assert_eq!(csv.lines().count(), 3, "{csv}");
     let (first, second) = (f(&rounds[0]["change_mm"]), f(&rounds[1]["change_mm"]));
     assert!(first > 0.0 && second < first / 2.0, "{first} then {second}");
+    assert!(
+        csv.starts_with("round,subjects,change_mm,shape_change_mm,slide_mm,"),
+        "{csv}"
+    );
     for r in rounds {
+        // The change splits into its parts along the normals and along the surface (the
+        // medial points' move is in the change only).
+        let (shape, slide) = (f(&r["shape_change_mm"]), f(&r["slide_mm"]));
+        assert!(shape > 0.0 && slide > 0.0 && shape.hypot(slide) <= 1.5 * f(&r["change_mm"]));
         assert_eq!(r["subjects"], 2);
         assert!(f(&r["max_spoke_normal_deg"]) <= 0.1 && f(&r["max_spoke_mismatch_pct"]) <= 0.1);
     }

@@ -6,7 +6,7 @@ use medial_core::construction::project::ProjectOptions;
 use medial_core::model::Model;
 use medial_core::{MedialTemplate, Vec3};
 use medial_stats::shape::procrustes;
-use medial_stats::{mean_template, shape_modes, Alignment, ShapeOf};
+use medial_stats::{mean_template, normal_and_tangential, shape_modes, Alignment, ShapeOf};
 use nalgebra::Rotation3;
 use std::path::Path;
 
@@ -172,4 +172,36 @@ fn the_mean_template_of_thickened_and_thinned_copies_is_the_toy() {
         mean.change
     );
     assert!(mean_template(&copies[..1], &t, Alignment::Rigid, &options).is_err());
+}
+
+#[test]
+fn a_round_s_shape_change_is_the_move_along_the_normals_and_its_slide_the_rest() {
+    let t = toy();
+    let q = t.landmarks();
+    let normals = t.tangents().normals(q);
+    // A unit vector across each normal, from the axis it is least aligned with.
+    let across: Vec<medial_core::Vec3> = (normals.iter())
+        .map(|n| {
+            let axis = medial_core::Vec3::ith(n.iamin(), 1.0);
+            n.cross(&axis).normalize()
+        })
+        .collect();
+    let moved = |a: f64, b: f64| -> Vec<medial_core::Vec3> {
+        (0..q.len())
+            .map(|k| match k < t.boundary_count() {
+                true => q[k] + a * normals[k] + b * across[k],
+                false => q[k],
+            })
+            .collect()
+    };
+    for (a, b) in [(0.3, 0.0), (0.0, 0.2), (0.3, 0.4), (-0.1, 0.0)] {
+        let (normal, slide) = normal_and_tangential(&t, &moved(a, b));
+        assert!((normal - f64::abs(a)).abs() < 1e-12, "{a} {b}: {normal}");
+        assert!((slide - b).abs() < 1e-12, "{a} {b}: {slide}");
+    }
+    // The mean of copies thickened by 10 % and thinned by 10 % is the toy: no change at all.
+    let options = ProjectOptions::default();
+    let pair = [subject(&t, |_| 1.1, 0.0), subject(&t, |_| 0.9, 0.0)];
+    let mean = mean_template(&pair, &t, Alignment::None, &options).unwrap();
+    assert!(mean.shape_change < 1e-9 && mean.slide < 1e-9, "{mean:?}");
 }
