@@ -58,6 +58,19 @@ impl MapMesh<'_> {
             .collect()
     }
 
+    /// Whether each triangle is significant in the map of corrected p-values `p`: its own
+    /// p at most [`ALPHA`], or for a map per point, most of its corners' (a mean of p-values
+    /// is not a p-value: three corners at 0.01, 0.01 and 0.2 are mostly significant, their
+    /// mean 0.073 is not).
+    fn significant(&self, p: &[f64]) -> Vec<bool> {
+        if self.cells {
+            return p.iter().map(|&v| v <= ALPHA).collect();
+        }
+        (self.mesh.triangles().iter())
+            .map(|t| t.iter().filter(|&&i| p[i] <= ALPHA).count() >= 2)
+            .collect()
+    }
+
     /// The PNG of two views of the mesh side by side, the front (as [`Camera::framing`] looks)
     /// and the back, triangle `t` in `colour(t)`; `None` where the mesh cannot be framed.
     fn views(&self, colour: impl Fn(usize) -> [f64; 3]) -> Option<Vec<u8>> {
@@ -122,15 +135,16 @@ fn maps(mesh: &MapMesh, r: &ContrastResult) -> Markup {
         ("p_tfce", r.p_tfce.clone()),
     ]
     .into_iter()
-    .filter_map(|(name, p)| Some((name, mesh.per_triangle(&p?))))
+    .filter_map(|(name, p)| Some((name, p?)))
     .collect();
     let p_views: Vec<(String, Option<String>)> = p_maps
         .iter()
         .map(|(name, p)| {
             let found = p.iter().filter(|&&v| v <= ALPHA).count();
+            let shown = mesh.significant(p);
             let view = strip(
                 mesh.views(|k| {
-                    if p[k] <= ALPHA {
+                    if shown[k] {
                         SIGNIFICANT
                     } else {
                         NOT_SIGNIFICANT
@@ -138,7 +152,12 @@ fn maps(mesh: &MapMesh, r: &ContrastResult) -> Markup {
                 }),
                 &format!("{name} ≤ {ALPHA}"),
             );
-            (format!("{name} ≤ {ALPHA}: {found} triangles"), view)
+            let elements = if mesh.cells {
+                "triangles"
+            } else {
+                "points (a triangle shown significant where two of its corners are)"
+            };
+            (format!("{name} ≤ {ALPHA}: {found} {elements}"), view)
         })
         .collect();
     let gradient = format!(
@@ -461,6 +480,29 @@ pub fn pca_page(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_triangle_of_a_point_map_is_significant_where_most_of_its_corners_are() {
+        let points = vec![
+            medial_core::Vec3::new(0.0, 0.0, 0.0),
+            medial_core::Vec3::new(1.0, 0.0, 0.0),
+            medial_core::Vec3::new(0.0, 1.0, 0.0),
+            medial_core::Vec3::new(1.0, 1.0, 0.0),
+        ];
+        let mesh = TriMesh::new(points, vec![[0, 1, 2], [1, 3, 2]]).unwrap();
+        // Corners 0 and 1 at 0.01, 2 at 0.2 (mean 0.073), 3 at 0.5.
+        let p = [0.01, 0.01, 0.2, 0.5];
+        let per_point = MapMesh {
+            mesh: &mesh,
+            cells: false,
+        };
+        assert_eq!(per_point.significant(&p), vec![true, false]);
+        let per_cell = MapMesh {
+            mesh: &mesh,
+            cells: true,
+        };
+        assert_eq!(per_cell.significant(&[0.04, 0.06]), vec![true, false]);
+    }
 
     #[test]
     fn a_histogram_line_counts_every_value_and_spans_the_observed() {
