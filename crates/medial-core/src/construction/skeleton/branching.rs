@@ -372,6 +372,168 @@ mod tests {
         Volume::new(dims, data, m).unwrap()
     }
 
+    /// Two ventricles in cross-section, extruded along z (`|z| ≤ 12`): the LV wall between
+    /// circles of radii 12 and 20 about 0, the RV wall between circles of radii 16 and 20 about
+    /// (16, 0), outside the LV's outer circle (walls 8 and 4 mm thick meeting at two
+    /// insertions). With an RV wall of 1 or 2 mm (outer radius 17 or 18), or at 0.25 mm voxels,
+    /// the RV's sheet is not kept: its medial points are cut off from the LV's where the RV wall
+    /// widens into the LV's (decision 0402).
+    struct Ventricles;
+
+    impl Ventricles {
+        const LV: [f64; 2] = [12.0, 20.0];
+        const RV: [f64; 2] = [16.0, 20.0];
+        const RV_CENTRE: [f64; 2] = [16.0, 0.0];
+
+        fn rv(p: [f64; 2]) -> f64 {
+            (p[0] - Self::RV_CENTRE[0]).hypot(p[1] - Self::RV_CENTRE[1])
+        }
+
+        fn inside(p: [f64; 2]) -> bool {
+            let (lv, rv) = (p[0].hypot(p[1]), Self::rv(p));
+            let wall = lv <= Self::LV[1] || rv <= Self::RV[1];
+            let cavity = lv < Self::LV[0] || (rv < Self::RV[0] && lv > Self::LV[1]);
+            wall && !cavity
+        }
+
+        /// The distance from `p` (in the wall) to the arc of the circle of `radius` about
+        /// `centre` where `on` holds: to the circle where its nearest point there is on the arc,
+        /// else to the nearer of the arc's ends (`ends`).
+        fn to_arc(
+            p: [f64; 2],
+            centre: [f64; 2],
+            radius: f64,
+            on: impl Fn([f64; 2]) -> bool,
+            ends: &[[f64; 2]],
+        ) -> f64 {
+            let d = [p[0] - centre[0], p[1] - centre[1]];
+            let r = d[0].hypot(d[1]);
+            let q = [centre[0] + radius * d[0] / r, centre[1] + radius * d[1] / r];
+            if on(q) {
+                return (r - radius).abs();
+            }
+            (ends.iter())
+                .map(|e| (p[0] - e[0]).hypot(p[1] - e[1]))
+                .fold(f64::INFINITY, f64::min)
+        }
+
+        /// The points where the circles of radius `r1` about 0 and `r2` about the RV's centre
+        /// cross.
+        fn crossings(r1: f64, r2: f64) -> [[f64; 2]; 2] {
+            let c = Self::RV_CENTRE[0];
+            let x = (r1 * r1 - r2 * r2 + c * c) / (2.0 * c);
+            let y = (r1 * r1 - x * x).sqrt();
+            [[x, y], [x, -y]]
+        }
+
+        /// The distances from `p` to the LV cavity, the RV cavity and the outside.
+        fn distances(p: [f64; 2]) -> [f64; 3] {
+            let [a, r] = Self::LV;
+            let [b, big] = Self::RV;
+            let cavity_ends = Self::crossings(r, b);
+            let outer_ends = Self::crossings(r, big);
+            let lv_cavity = p[0].hypot(p[1]) - a;
+            let rv_cavity = Self::to_arc(
+                p,
+                Self::RV_CENTRE,
+                b,
+                |q| q[0].hypot(q[1]) >= r,
+                &cavity_ends,
+            )
+            .min(Self::to_arc(
+                p,
+                [0.0, 0.0],
+                r,
+                |q| Self::rv(q) <= b,
+                &cavity_ends,
+            ));
+            let outside = Self::to_arc(p, [0.0, 0.0], r, |q| Self::rv(q) >= big, &outer_ends).min(
+                Self::to_arc(
+                    p,
+                    Self::RV_CENTRE,
+                    big,
+                    |q| q[0].hypot(q[1]) >= r,
+                    &outer_ends,
+                ),
+            );
+            [lv_cavity, rv_cavity, outside]
+        }
+
+        /// The upper insertion's junction: the point of the wall equidistant from the two
+        /// cavities and the outside (searched on a 0.01 mm grid; the lower one is its mirror).
+        fn junction() -> [f64; 2] {
+            let mut best = ([0.0, 0.0], f64::INFINITY);
+            for i in 0..=2000 {
+                for j in 0..=1500 {
+                    let p = [0.01 * i as f64, 5.0 + 0.01 * j as f64];
+                    if !Self::inside(p) {
+                        continue;
+                    }
+                    let [d1, d2, d3] = Self::distances(p);
+                    let spread = d1.max(d2).max(d3) - d1.min(d2).min(d3);
+                    if spread < best.1 {
+                        best = (p, spread);
+                    }
+                }
+            }
+            assert!(best.1 < 0.02, "no junction: {best:?}");
+            best.0
+        }
+
+        /// The shape on a grid of voxel `v`.
+        fn mask(v: f64) -> Volume {
+            let lo = Vec3::new(-23.0, -23.0, -14.0);
+            let dims = [
+                (60.0 / v) as usize,
+                (46.0 / v) as usize,
+                (28.0 / v) as usize,
+            ];
+            let mut m = Matrix4::new_scaling(v);
+            m[(3, 3)] = 1.0;
+            m.fixed_view_mut::<3, 1>(0, 3).copy_from(&lo);
+            let [nx, ny, nz] = dims;
+            let data = (0..nx * ny * nz)
+                .map(|i| {
+                    let ijk = Vector4::new(
+                        (i % nx) as f64,
+                        ((i / nx) % ny) as f64,
+                        (i / (nx * ny)) as f64,
+                        1.0,
+                    );
+                    let p = m * ijk;
+                    f64::from(u8::from(Self::inside([p.x, p.y]) && p.z.abs() <= 12.0))
+                })
+                .collect();
+            Volume::new(dims, data, m).unwrap()
+        }
+    }
+
+    #[test]
+    fn two_ventricles_have_three_sheets_and_two_seams_at_their_insertions() {
+        let v = 0.5;
+        let truth = Ventricles::junction();
+        let points = medial_points(&Ventricles::mask(v), MIN_FEATURE_ANGLE_DEG).unwrap();
+        let branches = branching(&points, v);
+        let counts = branches.counts;
+        assert_eq!((counts.sheets, counts.seams), (3, 2), "{counts:?}");
+        for k in 0..2 {
+            let on_seam: Vec<MedialPoint> = (branches.seam_points(k).iter())
+                .map(|&i| points[i])
+                .collect();
+            let seam = Seam::fit(&on_seam, v).unwrap();
+            let middle: Vec<&Vec3> = seam.points.iter().filter(|p| p.z.abs() < 4.0).collect();
+            assert!(middle.len() > 3, "{seam:?}");
+            for p in middle {
+                let off = (p.x - truth[0]).hypot(p.y.abs() - truth[1]);
+                assert!(
+                    off <= v,
+                    "a seam vertex at {:?}, {off} mm from {truth:?}",
+                    (p.x, p.y, p.z)
+                );
+            }
+        }
+    }
+
     #[test]
     fn the_seam_of_a_t_of_thick_walls_lies_at_its_junction_within_a_voxel() {
         // The ball tangent to the bar's far face (y = −h) and to the two inner corners
