@@ -286,6 +286,39 @@ fn bad_pca_inputs_are_one_line_errors() {
         1,
         &["--subjects: no subject 'zz'"],
     );
+    // A subject's fitted model whose bytes differ from the digest its fit recorded.
+    std::fs::write(
+        input.join("s0").join("summary.json"),
+        r#"{"sha256": {"fitted_template.vtk": "00"}}"#,
+    )
+    .unwrap();
+    let line = one_line_error(
+        &["pca", s(&input), "--out", s(&out), "--subjects", "s0"],
+        1,
+        &["fitted_template.vtk", "SHA-256"],
+    );
+    assert!(line.contains("s0"), "{line}");
+    // An output folder of another command's results (a fit's) is refused before any work and
+    // kept as it was; so is a batch folder.
+    let fit = d.join("fit");
+    std::fs::create_dir_all(&fit).unwrap();
+    let summary = r#"{"version": "0", "status": "converged", "files": []}"#;
+    std::fs::write(fit.join("summary.json"), summary).unwrap();
+    one_line_error(
+        &["pca", s(&input), "--out", s(&fit)],
+        1,
+        &["would overwrite", "another --out"],
+    );
+    assert_eq!(
+        std::fs::read_to_string(fit.join("summary.json")).unwrap(),
+        summary
+    );
+    assert_eq!(std::fs::read_dir(&fit).unwrap().count(), 1);
+    one_line_error(
+        &["pca", s(&input), "--out", s(&input)],
+        1,
+        &["cohort.csv", "would overwrite"],
+    );
 }
 
 #[test]

@@ -415,6 +415,15 @@ fn stats_refuses_a_damaged_subject_file_and_an_output_folder_of_other_results() 
         &["fitted_template.vtk", "SHA-256"],
     );
     assert!(line.contains("a1"), "{line}");
+    // Likewise its atoms.csv, for a measure read from it.
+    let atoms = input.join("a1").join("atoms.csv");
+    std::fs::write(&atoms, "atom,fidelity\n0,1\n").unwrap();
+    std::fs::write(&marker, r#"{"sha256": {"atoms.csv": "00"}}"#).unwrap();
+    let mut column = stats(&d.join("st"));
+    column.extend(["--array".to_owned(), "fidelity".to_owned()]);
+    let line = one_line_error(&args(&column), 1, &["atoms.csv", "SHA-256"]);
+    assert!(line.contains("a1"), "{line}");
+    std::fs::remove_file(&atoms).unwrap();
     std::fs::remove_file(&marker).unwrap();
     // A fit's folder and a batch folder are not overwritten; the fit's summary stays.
     let fit = d.join("fit");
