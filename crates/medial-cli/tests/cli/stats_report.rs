@@ -149,7 +149,10 @@ fn check_accessors(
                 .then_some(bounds)
                 .ok_or_else(|| format!("accessor {index}: {which} of another length"))
         };
-        let (min, max) = (bounds(accessor.min(), "min")?, bounds(accessor.max(), "max")?);
+        let (min, max) = (
+            bounds(accessor.min(), "min")?,
+            bounds(accessor.max(), "max")?,
+        );
         for c in 0..min.len() {
             let column = values.iter().map(|v| v[c]);
             let least = column.clone().fold(f64::INFINITY, f64::min);
@@ -170,7 +173,10 @@ fn check_accessors(
                 .count();
             for (semantic, attribute) in primitive.attributes() {
                 if attribute.count() != vertices {
-                    return Err(format!("mesh {}: {semantic:?} of another count", mesh.index()));
+                    return Err(format!(
+                        "mesh {}: {semantic:?} of another count",
+                        mesh.index()
+                    ));
                 }
             }
             let indices = primitive.indices().ok_or("a primitive without indices")?;
@@ -179,7 +185,11 @@ fn check_accessors(
             }
             let values = accessor_values(&indices, buffers)?;
             if let Some(i) = values.iter().find(|v| v[0] >= vertices as f64) {
-                return Err(format!("mesh {}: index {} of {vertices} vertices", mesh.index(), i[0]));
+                return Err(format!(
+                    "mesh {}: index {} of {vertices} vertices",
+                    mesh.index(),
+                    i[0]
+                ));
             }
         }
     }
@@ -263,10 +273,16 @@ fn pca_writes_each_mode_as_an_animation_from_minus_to_plus_two_sd() {
 /// component, its count twice what its view holds, its `max` left out are each refused.
 fn refuses_broken_accessors(document: gltf::Document, buffers: &[gltf::buffer::Data]) {
     use gltf::json::validation::USize64;
-    let position = (document.meshes().next().unwrap().primitives().next().unwrap())
-        .get(&gltf::Semantic::Positions)
+    let position = (document
+        .meshes()
+        .next()
         .unwrap()
-        .index();
+        .primitives()
+        .next()
+        .unwrap())
+    .get(&gltf::Semantic::Positions)
+    .unwrap()
+    .index();
     let json = document.into_json();
     let broken = |change: &dyn Fn(&mut gltf::json::Accessor)| {
         let mut json = json.clone();
