@@ -1,10 +1,11 @@
 //! `medial mean` on the toy bent both ways (short SSD fits from the batch tests' base config):
 //! rounds that fit from the previous round's mean, a change that shrinks, a mean halfway
 //! between the two fits and nearer the unbent toy than either, whose medial constraints hold;
-//! the tolerance stops the rounds.
+//! the tolerance on the change of shape (not the slide along the surface) stops the rounds; an
+//! output folder of other results is refused before any work.
 
 use crate::batch::{base_config, bent_toy, table, toy_template};
-use crate::common::{f, run_json, s};
+use crate::common::{f, one_line_error, run_json, s};
 use medial_core::model::Model;
 use medial_core::MedialTemplate;
 use medial_stats::shape::procrustes;
@@ -99,7 +100,15 @@ fn mean_rounds_fit_from_the_last_mean_and_approach_the_unbent_toy() {
         assert!(distance(&mean, &toy) < distance(fit, &toy));
     }
 
-    // A tolerance the first round meets stops there.
+    // The rounds stop on the change of shape: a tolerance above round 1's move along the
+    // normals (0.30 mm) but below its landmarks' move (0.53 mm, most of it along the surface)
+    // stops after round 1, whose fits are the same bits.
+    let (shape, change) = (f(&rounds[0]["shape_change_mm"]), f(&rounds[0]["change_mm"]));
+    assert!(
+        shape < 0.8 * change,
+        "{shape} of {change} mm along the normals"
+    );
+    let tolerance = ((shape + change) / 2.0).to_string();
     let out = d.join("once");
     let summary = run_json(&[
         "mean",
@@ -110,10 +119,38 @@ fn mean_rounds_fit_from_the_last_mean_and_approach_the_unbent_toy() {
         "--config",
         s(&base),
         "--tolerance",
-        "10",
+        &tolerance,
         "-q",
     ]);
     assert_eq!(summary["converged"], true);
     assert_eq!(summary["rounds"].as_array().unwrap().len(), 1);
+    assert_eq!(
+        summary["rounds"][0]["shape_change_mm"],
+        rounds[0]["shape_change_mm"]
+    );
     assert!(!out.join("round2").exists());
+}
+
+#[test]
+fn mean_refuses_an_output_folder_of_other_results_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let subjects = d.join("subjects.csv");
+    std::fs::write(&subjects, "subject,image\na,a.nii.gz\nb,b.nii.gz\n").unwrap();
+    let fit = d.join("fit");
+    std::fs::create_dir_all(&fit).unwrap();
+    let summary = r#"{"version": "0", "status": "converged", "files": []}"#;
+    std::fs::write(fit.join("summary.json"), summary).unwrap();
+    let toy = toy_template();
+    let args = ["mean", s(&toy), s(&subjects), "--out", s(&fit)];
+    one_line_error(&args, 1, &["would overwrite", "another --out"]);
+    // Nothing fitted or written: the fit's folder is as it was.
+    assert_eq!(std::fs::read_dir(&fit).unwrap().count(), 1);
+    assert_eq!(
+        std::fs::read_to_string(fit.join("summary.json")).unwrap(),
+        summary
+    );
+    // A folder whose summary.json is another analysis's (`medial pca`).
+    std::fs::write(fit.join("summary.json"), r#"{"command": "pca"}"#).unwrap();
+    one_line_error(&args, 1, &["the results of `medial pca`"]);
 }

@@ -134,7 +134,7 @@ fn accessor_values(
 /// each component (ACCESSOR_MIN_MISMATCH, ACCESSOR_MAX_MISMATCH: compared as `float`), every
 /// index naming a vertex of its primitive, every animation's times increasing and as many as its
 /// keys. The first problem found, if any.
-fn check_accessors(
+pub fn check_accessors(
     document: &gltf::Document,
     buffers: &[gltf::buffer::Data],
 ) -> Result<(), String> {
