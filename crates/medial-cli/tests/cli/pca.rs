@@ -10,7 +10,7 @@ use medial_core::model::{Model, SpokeMetrics};
 use medial_core::{MedialTemplate, Vec3};
 use medial_io::vtk::read_polydata;
 use nalgebra::{DMatrix, Rotation3, SymmetricEigen};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Subjects.
 const N: usize = 10;
@@ -60,15 +60,22 @@ fn correlation(a: &[f64], b: &[f64]) -> f64 {
     cov / (sa * sb).sqrt()
 }
 
+/// A cohort of `N` subjects of the toy with a planted mode of amounts 0.15 ([`subject`]), and
+/// `gone`; returns its folder.
+fn planted_cohort(d: &Path) -> PathBuf {
+    let template = toy();
+    let subjects: Vec<(String, MedialTemplate)> = (0..N)
+        .map(|i| (format!("s{i}"), subject(&template, i, 0.15)))
+        .collect();
+    write_cohort(d, &subjects)
+}
+
 #[test]
 fn pca_finds_a_planted_mode_and_its_scores_are_a_design() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let template = toy();
-    let subjects: Vec<(String, MedialTemplate)> = (0..N)
-        .map(|i| (format!("s{i}"), subject(&template, i, 0.15)))
-        .collect();
-    let input = write_cohort(d, &subjects);
+    let input = planted_cohort(d);
     let out = d.join("pca");
     let o = medial(&["pca", s(&input), "--out", s(&out), "--modes", "3"]);
     let err = text(&o.stderr);
@@ -312,11 +319,7 @@ fn bad_pca_inputs_are_one_line_errors() {
 fn pca_takes_the_subjects_it_is_given() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let template = toy();
-    let subjects: Vec<(String, MedialTemplate)> = (0..N)
-        .map(|i| (format!("s{i}"), subject(&template, i, 0.15)))
-        .collect();
-    let input = write_cohort(d, &subjects);
+    let input = planted_cohort(d);
     let out = d.join("pca");
     let summary = run_json(&[
         "pca",

@@ -346,27 +346,26 @@ mod tests {
     /// wall running on through an insertion, the other wall branching off it).
     fn t_walls(h: f64, v: f64) -> Volume {
         let lo = Vec3::new(-20.0, -h - 2.0, -16.0);
-        let dims = [
-            (40.0 / v) as usize,
-            ((22.0 + h) / v) as usize,
-            (32.0 / v) as usize,
-        ];
+        mask(lo, Vec3::new(40.0, 22.0 + h, 32.0), v, |p| {
+            let bar = p.y.abs() <= h && p.x.abs() <= 18.0;
+            let stem = p.x.abs() <= h && p.y >= 0.0 && p.y <= 18.0;
+            (bar || stem) && p.z.abs() <= 14.0
+        })
+    }
+
+    /// The mask (1 where `inside`) on the grid of voxel `v` whose first voxel centre is at
+    /// `lo`, spanning `size` (mm).
+    fn mask(lo: Vec3, size: Vec3, v: f64, inside: impl Fn(Vec3) -> bool) -> Volume {
+        let dims = [0, 1, 2].map(|d| (size[d] / v) as usize);
         let mut m = Matrix4::new_scaling(v);
         m[(3, 3)] = 1.0;
         m.fixed_view_mut::<3, 1>(0, 3).copy_from(&lo);
-        let [nx, ny, nz] = dims;
-        let data = (0..nx * ny * nz)
+        let [nx, ny, _] = dims;
+        let data = (0..dims.iter().product())
             .map(|i| {
-                let ijk = Vector4::new(
-                    (i % nx) as f64,
-                    ((i / nx) % ny) as f64,
-                    (i / (nx * ny)) as f64,
-                    1.0,
-                );
-                let p = m * ijk;
-                let bar = p.y.abs() <= h && p.x.abs() <= 18.0;
-                let stem = p.x.abs() <= h && p.y >= 0.0 && p.y <= 18.0;
-                f64::from(u8::from((bar || stem) && p.z.abs() <= 14.0))
+                let ijk = [i % nx, (i / nx) % ny, i / (nx * ny)].map(|c| c as f64);
+                let p = m * Vector4::new(ijk[0], ijk[1], ijk[2], 1.0);
+                f64::from(u8::from(inside(p.xyz())))
             })
             .collect();
         Volume::new(dims, data, m).unwrap()
@@ -483,28 +482,9 @@ mod tests {
         /// The shape on a grid of voxel `v`.
         fn mask(v: f64) -> Volume {
             let lo = Vec3::new(-23.0, -23.0, -14.0);
-            let dims = [
-                (60.0 / v) as usize,
-                (46.0 / v) as usize,
-                (28.0 / v) as usize,
-            ];
-            let mut m = Matrix4::new_scaling(v);
-            m[(3, 3)] = 1.0;
-            m.fixed_view_mut::<3, 1>(0, 3).copy_from(&lo);
-            let [nx, ny, nz] = dims;
-            let data = (0..nx * ny * nz)
-                .map(|i| {
-                    let ijk = Vector4::new(
-                        (i % nx) as f64,
-                        ((i / nx) % ny) as f64,
-                        (i / (nx * ny)) as f64,
-                        1.0,
-                    );
-                    let p = m * ijk;
-                    f64::from(u8::from(Self::inside([p.x, p.y]) && p.z.abs() <= 12.0))
-                })
-                .collect();
-            Volume::new(dims, data, m).unwrap()
+            mask(lo, Vec3::new(60.0, 46.0, 28.0), v, |p| {
+                Self::inside([p.x, p.y]) && p.z.abs() <= 12.0
+            })
         }
     }
 
