@@ -25,8 +25,8 @@ const MAGIC: &[u8; 8] = b"MEDIALCK";
 /// checkpoint types in it change. 2: the L-BFGS state as nalgebra vectors and the coarse time
 /// steps' restart point (format 1 checkpoints read as damaged before); 3: the L-BFGS state
 /// as plain lists (`medial_core::fit::lbfgs_vector`); 4: the SHA-256 digest of the record
-/// before it.
-const FORMAT: u32 = 4;
+/// before it; 5: the stage's last reported violation (`Extend`'s rate).
+const FORMAT: u32 = 5;
 
 /// Bytes of the digest after the format number.
 const DIGEST: usize = 32;

@@ -186,14 +186,16 @@ pub struct StageConfig {
     /// The attachment's relative change over an AL iteration at most which it has settled.
     #[serde(default = "defaults::settle_data_change")]
     pub settle_data_change: f64,
-    /// Go on past `al_iterations`, up to this many more AL iterations, while the largest `|C|`
-    /// is above `extend_above` and each AL iteration at least halves it (default: off).
+    /// Go on past `al_iterations`, up to this many more AL iterations, while the largest
+    /// spoke–normal angle or spoke mismatch is beyond `extend_beyond` of its tolerance and the
+    /// rate at which the last AL iteration lowered it, kept up over the AL iterations left,
+    /// would bring it within the tolerance (default: off).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub extend_al_iterations: Option<usize>,
-    /// With `extend_al_iterations`: the largest `|C|` (the constraints' unit) above which the
-    /// AL iterations go on.
+    /// With `extend_al_iterations`: the fraction of `tolerance_deg` / `tolerance_pct` beyond
+    /// which the AL iterations go on.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub extend_above: Option<f64>,
+    pub extend_beyond: Option<f64>,
     /// Stop when ‖∇E‖ falls below this fraction of its initial value.
     #[serde(default = "defaults::gradient_tolerance")]
     pub gradient_tolerance: f64,
@@ -369,7 +371,7 @@ impl StageConfig {
                 .settle
                 .map_or_else(defaults::settle_data_change, |t| t.data_change),
             extend_al_iterations: s.extend.map(|e| e.at_most),
-            extend_above: s.extend.map(|e| e.above),
+            extend_beyond: s.extend.map(|e| e.above),
             gradient_tolerance: l.gradient_tolerance,
             relative_decrease: l.relative_decrease,
             progress_window: l.progress.map_or(0, |p| p.window),
@@ -416,7 +418,7 @@ impl StageConfig {
                 }),
                 extend: self
                     .extend_al_iterations
-                    .zip(self.extend_above)
+                    .zip(self.extend_beyond)
                     .map(|(at_most, above)| Extend { above, at_most }),
                 coarse: self.coarse_time_steps.map(|time_steps| CoarseTime {
                     time_steps,
@@ -522,9 +524,9 @@ impl StageConfig {
                 ));
             }
         }
-        if self.extend_al_iterations.is_some() != self.extend_above.is_some() {
+        if self.extend_al_iterations.is_some() != self.extend_beyond.is_some() {
             return Err(format!(
-                "stage '{}': extend_al_iterations and extend_above go together",
+                "stage '{}': extend_al_iterations and extend_beyond go together",
                 self.name
             ));
         }

@@ -4,7 +4,9 @@
 //! started), then `λ^n_l ← λ^n_l − μ C_l(q^n)` at the optimum, then `μ ← μ·μ_factor` (always,
 //! or only when `max |C|` did not halve since the previous AL iteration). `μ` never exceeds
 //! [`AlSchedule::mu_max`], a guard against the divergence the reference implementation shows
-//! when `μ` runs away.
+//! when `μ` runs away. Whether the schedule goes on past its AL iterations ([`Extend`]) is
+//! judged on the constraints as a fit reports them: the largest spoke–normal angle and spoke
+//! mismatch at the end of the flow against the stage's tolerance ([`Constraints::violation`]).
 
 use crate::attachment::Attachment;
 use crate::fit::guard::{self, Guard, Unsound};
@@ -13,7 +15,10 @@ use crate::fit::optimize::{
     minimize, IterationReport, LbfgsOptions, Minimization, MinimizerCheckpoint, Minimum, Start,
     StopReason,
 };
+use crate::fit::spec::MedialTolerance;
 use crate::flow::{retime_momenta, Flow, STRAIN_LIMIT};
+use crate::model::metrics::SpokeMetrics;
+use crate::model::MedialTemplate;
 use crate::{Error, Result, Vec3};
 use serde::{Deserialize, Serialize};
 use std::cell::Cell;
@@ -56,16 +61,32 @@ pub struct AlSchedule {
 }
 
 /// More AL iterations for a stage whose constraints end above a level: after the schedule's
-/// last AL iteration, one more (μ growing as before) while `max |C| > above` and the AL
-/// iteration just ended at least halved `max |C|`, at most `at_most` more. A schedule whose
-/// budget ran out while the constraints still converge goes on; one that stalls ends, and is
+/// last AL iteration, one more (μ growing as before) while the violation `v`
+/// ([`Constraints::violation`], 1 at the tolerance) is above `above` and the schedule is on
+/// course ([`Extend::on_course`]), at most `at_most` more. A schedule whose budget ran out
+/// while the constraints still converge fast enough to meet their tolerance goes on; one that
+/// stalls, or converges too slowly to meet it within the AL iterations left, ends, and is
 /// reported as not meeting its tolerance.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Extend {
-    /// The `max |C|` above which the schedule goes on, in the constraints' unit.
+    /// The violation above which the schedule goes on, a fraction of the tolerance.
     pub above: f64,
     /// Most AL iterations added.
     pub at_most: usize,
+}
+
+impl Extend {
+    /// Whether a schedule whose last AL iteration took the violation from `before` to `now`,
+    /// with `left` AL iterations still allowed, is on course: the violation fell, and at the
+    /// rate `ρ = now/before` kept up over the AL iterations left it would be within the
+    /// tolerance, `now · ρ^left ≤ 1`. Each AL iteration multiplies the multipliers' error by
+    /// about the same factor once μ is large enough (the linear rate of the method of
+    /// multipliers), so the last rate is the best guess of the next; where it cannot meet the
+    /// tolerance in time, more AL iterations only cost time.
+    pub fn on_course(before: f64, now: f64, left: usize) -> bool {
+        let rate = now / before;
+        rate < 1.0 && now * rate.powi(left.min(i32::MAX as usize) as i32) <= 1.0
+    }
 }
 
 /// Coarse to fine in time: the first [`CoarseTime::al_iterations`] AL iterations (fewer if
@@ -91,8 +112,8 @@ pub struct CoarseTime {
 /// longer moves the fit.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Settle {
-    /// The largest `|C|` that counts as met, in the constraints' unit (in relative units about
-    /// the spoke–normal angle in radians and the relative spoke mismatch: 1e-3 ≈ 0.06°, 0.1 %).
+    /// The largest `|C|` that counts as met, in the constraints' unit (in relative units the
+    /// angle in radians and the relative mismatch at the template's scale; decision 0035).
     pub max_abs_constraint: f64,
     /// The largest relative change of the attachment over the AL iteration.
     pub data_change: f64,
@@ -157,12 +178,13 @@ impl AlSchedule {
             && self.iterations >= 1
             && self.settle.map_or(true, |s| {
                 s.max_abs_constraint >= 0.0 && s.data_change >= 0.0
-            });
+            })
+            && self.extend.map_or(true, |e| e.above >= 0.0);
         if ok {
             Ok(())
         } else {
             Err(Error::InvalidParameter(format!(
-                "augmented Lagrangian needs mu > 0, mu_factor ≥ 1, mu_max ≥ mu, at least one iteration and a non-negative settling rule, got {self:?}"
+                "augmented Lagrangian needs mu > 0, mu_factor ≥ 1, mu_max ≥ mu, at least one iteration, non-negative settling and extension levels, got {self:?}"
             )))
         }
     }
@@ -181,10 +203,39 @@ pub struct Stage<'a> {
     /// `w_data`.
     pub data_weight: f64,
     /// Medial constraints, or none.
-    pub constraints: Option<&'a dyn ConstraintSet>,
+    pub constraints: Option<Constraints<'a>>,
     /// The fold test of every accepted iterate ([`Guard::new`] of the model), or none (the
     /// other checks of [`guard::check`] always apply).
     pub guard: Option<&'a Guard>,
+}
+
+/// The medial constraints of a stage and how its schedule judges them.
+#[derive(Clone, Copy)]
+pub struct Constraints<'a> {
+    /// The constraints the penalty holds.
+    pub set: &'a dyn ConstraintSet,
+    /// The template whose constraints they are: its spoke figures are what a fit reports.
+    pub template: &'a MedialTemplate,
+    /// What counts as medial.
+    pub tolerance: MedialTolerance,
+}
+
+impl Constraints<'_> {
+    /// How far the template at landmarks `q` is from medial, a fraction of the tolerance: the
+    /// larger of its largest spoke–normal angle and largest spoke mismatch ([`SpokeMetrics`],
+    /// the figures a fit reports at the end of its flow), each over its tolerance. 1 is at the
+    /// tolerance; NaN where the geometry degenerates.
+    pub fn violation(&self, q: &[Vec3]) -> f64 {
+        let m = SpokeMetrics::compute(self.template, q);
+        let angle = m.max_spoke_normal_deg / self.tolerance.angle_deg;
+        let mismatch = 100.0 * m.max_spoke_mismatch / self.tolerance.mismatch_pct;
+        // `f64::max` would drop a NaN.
+        if angle.is_nan() || mismatch.is_nan() {
+            f64::NAN
+        } else {
+            angle.max(mismatch)
+        }
+    }
 }
 
 /// Where an L-BFGS iteration sits in the schedule.
@@ -286,6 +337,8 @@ pub struct StageCheckpoint {
     /// The attachment at the end of the previous AL iteration (for [`Settle`]).
     #[serde(default)]
     previous_data: f64,
+    /// [`Constraints::violation`] at the end of the previous AL iteration (for [`Extend`]).
+    previous_reported: f64,
     /// `E` at the start of the stage, the reference of the divergence guard.
     guard_start: Option<f64>,
     /// Set while the schedule is in its coarse AL iterations (momenta and `λ` in coarse steps).
@@ -393,6 +446,7 @@ struct Schedule {
     lambda: Vec<f64>,
     previous_violation: f64,
     previous_data: f64,
+    previous_reported: f64,
     outcome: StageOutcome,
 }
 
@@ -420,7 +474,7 @@ impl Schedule {
             None => (momenta, None),
         };
         let (mu, lambda) = match stage.constraints {
-            Some(c) => (schedule.mu, vec![0.0; flow.time_steps() * c.len()]),
+            Some(c) => (schedule.mu, vec![0.0; flow.time_steps() * c.set.len()]),
             None => (0.0, Vec::new()),
         };
         let at = Self {
@@ -430,6 +484,8 @@ impl Schedule {
             lambda,
             previous_violation: f64::INFINITY,
             previous_data: f64::NAN,
+            // Before the first AL iteration ends any violation is a decrease.
+            previous_reported: f64::INFINITY,
             outcome: StageOutcome {
                 momenta: Vec::new(),
                 evaluation: Evaluation::default(),
@@ -461,7 +517,7 @@ impl Schedule {
             .coarse
             .as_ref()
             .map_or(stage.flow.time_steps(), |p| p.steps);
-        let lambda_len = stage.constraints.map_or(0, |k| steps * k.len());
+        let lambda_len = stage.constraints.map_or(0, |k| steps * k.set.len());
         let coarse_fits = c.coarse.as_ref().map_or(true, |p| {
             coarse.is_some_and(|f| f.time_steps() == p.steps)
                 && p.fine_steps == stage.flow.time_steps()
@@ -482,6 +538,7 @@ impl Schedule {
             lambda: c.lambda.clone(),
             previous_violation: c.previous_violation,
             previous_data: c.previous_data,
+            previous_reported: c.previous_reported,
             outcome: c.done.clone(),
         })
     }
@@ -512,6 +569,7 @@ impl Schedule {
             lambda: self.lambda,
             previous_violation: self.previous_violation,
             previous_data: self.previous_data,
+            previous_reported: self.previous_reported,
             guard_start,
             coarse: self.coarse,
             done: self.outcome,
@@ -628,11 +686,17 @@ pub fn run_stage(
             Some(_) => schedule.iterations,
             None => 1,
         };
+        let reported = match (stage.constraints, schedule.extend) {
+            (Some(c), Some(_)) => c.violation(&outcome.evaluation.final_positions),
+            _ => f64::NAN,
+        };
+        let left = al_iterations - (al_iteration + 1);
         let extended = al_iteration + 1 >= scheduled
-            && al_iteration + 1 < al_iterations
-            && schedule
-                .extend
-                .is_some_and(|e| violation > e.above && violation <= 0.5 * at.previous_violation);
+            && left > 0
+            && schedule.extend.is_some_and(|e| {
+                reported > e.above && Extend::on_course(at.previous_reported, reported, left)
+            });
+        at.previous_reported = reported;
         if outcome.unsound.is_some()
             || (outcome.settled && !coarse_settled)
             || (al_iteration + 1 >= scheduled && !extended)
@@ -698,7 +762,7 @@ fn too_strained(flow: &Flow, q0: &[Vec3], u: &[f64]) -> bool {
 
 /// The number of constraints of `stage` (0 without).
 fn lambda_count(stage: &Stage<'_>) -> usize {
-    stage.constraints.map_or(0, |c| c.len())
+    stage.constraints.map_or(0, |c| c.set.len())
 }
 
 /// The objective of `stage` in `flow` (the stage's, or its coarse one) with the penalty `(μ, λ)`
@@ -711,8 +775,8 @@ fn objective_of<'a>(
 ) -> Result<Objective<'a>> {
     let objective = Objective::new(flow, stage.initial, stage.attachment, stage.data_weight);
     match stage.constraints {
-        Some(constraints) => objective.with_penalty(Penalty {
-            constraints,
+        Some(c) => objective.with_penalty(Penalty {
+            constraints: c.set,
             mu,
             lambda,
         }),

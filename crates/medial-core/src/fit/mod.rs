@@ -23,8 +23,8 @@ pub use align::{
     similarity_between, Alignment, AlignmentFailure,
 };
 pub use augmented_lagrangian::{
-    run_stage, AlSchedule, CoarseTime, Extend, MuUpdate, Progress, Stage, StageCheckpoint,
-    StageOutcome, StageRun, StageStart, UnsoundStop,
+    run_stage, AlSchedule, CoarseTime, Constraints, Extend, MuUpdate, Progress, Settle, Stage,
+    StageCheckpoint, StageOutcome, StageRun, StageStart, UnsoundStop,
 };
 pub use guard::{Guard, Unsound};
 pub use objective::{ConstraintSet, Evaluation, Objective, Penalty};

@@ -290,17 +290,19 @@ pub fn finest_width(fine: f64, sigma: f64) -> f64 {
     sigma.max(0.5 * fine).min(fine)
 }
 
-/// The largest `|C|` (relative units: about 0.06° and 0.1 %) at which an automatic stage's AL
-/// iterations end early once the attachment changes by less than 0.1 % over one: the
-/// constraints are then well inside their tolerance and tightening them no longer moves the
-/// fit.
+/// The largest `|C|` (relative units: about 0.06° and 0.1 % at the template's scale; where a
+/// fit shortens spokes and tangents it reads the angle that many times too small, decision
+/// 0035) at which an automatic stage's AL iterations end early once the attachment changes by
+/// less than 0.1 % over one: the constraints are then well inside their tolerance and
+/// tightening them no longer moves the fit.
 pub const SETTLE_CONSTRAINT: f64 = 1e-3;
 
-/// A constrained automatic stage that ends its schedule with `max |C|` above this (relative
-/// units: about 0.3° and 0.5 %, half the tolerance of a fit) goes on for up to
-/// [`EXTEND_AT_MOST`] more AL iterations while each at least halves it ([`Extend`]): the budget
-/// is there to finish the job, not to end it; a schedule that stalls ends.
-pub const EXTEND_ABOVE: f64 = 5e-3;
+/// A constrained automatic stage that ends its schedule with its largest angle or mismatch
+/// above this fraction of the tolerance (0.5°, 0.5 % of 1°, 1 %, as a fit reports them) goes on
+/// for up to [`EXTEND_AT_MOST`] more AL iterations while it is on course to meet the tolerance
+/// ([`Extend::on_course`]): the budget is there to finish the job, not to end it; a schedule
+/// that stalls, or converges too slowly to finish in the AL iterations left, ends.
+pub const EXTEND_ABOVE: f64 = 0.5;
 
 /// Most AL iterations an automatic stage adds ([`EXTEND_ABOVE`]).
 pub const EXTEND_AT_MOST: usize = 4;
@@ -309,7 +311,8 @@ pub const EXTEND_AT_MOST: usize = 4;
 pub const SETTLE_DATA_CHANGE: f64 = 1e-3;
 
 /// A stage with the medial constraints in relative units, μ rising tenfold over the AL
-/// iterations of `schedule`, ending early once they settle ([`SETTLE_CONSTRAINT`]).
+/// iterations of `schedule`, ending early once they settle ([`SETTLE_CONSTRAINT`]) and going on
+/// while they are on course to meet their tolerance ([`EXTEND_ABOVE`]).
 fn constrained(name: &str, attachment: AttachmentSpec, schedule: Schedule) -> StageSpec {
     let mut stage = StageSpec::new(name, attachment);
     stage.schedule.settle = Some(Settle {

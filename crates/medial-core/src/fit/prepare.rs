@@ -25,7 +25,7 @@ use crate::attachment::varifold::{Varifold, VarifoldParams};
 use crate::attachment::Attachment;
 use crate::fit::augmented_lagrangian::AlSchedule;
 use crate::fit::optimize::LbfgsOptions;
-use crate::fit::spec::{AttachmentSpec, DiceSpec, StageSpec, VarifoldSpec};
+use crate::fit::spec::{AttachmentSpec, DiceSpec, MedialTolerance, StageSpec, VarifoldSpec};
 use crate::image::rasterize::voxel_dice;
 use crate::image::volume::Volume;
 use crate::memory::{Estimate, MemoryLimit};
@@ -83,6 +83,8 @@ pub struct PreparedStage {
     pub varifold_width: Option<f64>,
     /// The medial constraints, when they apply.
     pub constraints: Option<MedialConstraints>,
+    /// What counts as medial at the end (constrained stages).
+    pub tolerance: MedialTolerance,
     /// The μ schedule.
     pub schedule: AlSchedule,
     /// L-BFGS options.
@@ -157,6 +159,7 @@ impl PreparedStage {
             surface,
             varifold_width,
             constraints,
+            tolerance: stage.tolerance,
             schedule: stage.schedule,
             lbfgs: stage.lbfgs,
         })

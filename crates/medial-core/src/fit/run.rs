@@ -16,12 +16,11 @@
 //! let fitted = fit.flow().shoot(fit.model().landmarks(), &outcomes.last().unwrap().momenta);
 //! ```
 
-use crate::fit::augmented_lagrangian::{Stage, StageOutcome};
+use crate::fit::augmented_lagrangian::{Constraints, Stage, StageOutcome};
 use crate::fit::guard::Guard;
 use crate::fit::initial::{
     align_template, initial_alignment, thickened, InitialAlignment, THICKEN_AT_LEAST,
 };
-use crate::fit::objective::ConstraintSet;
 use crate::fit::plan::{self, Geometry};
 use crate::fit::prepare::{PreparedStage, Target};
 use crate::fit::spec::FitSpec;
@@ -118,7 +117,13 @@ impl Fit {
                     initial: self.model.landmarks(),
                     attachment: p.attachment.as_ref(),
                     data_weight: p.data_weight,
-                    constraints: p.constraints.as_ref().map(|c| c as &dyn ConstraintSet),
+                    constraints: p.constraints.as_ref().zip(self.model.medial()).map(
+                        |(set, template)| Constraints {
+                            set,
+                            template,
+                            tolerance: p.tolerance,
+                        },
+                    ),
                     guard: Some(if p.constraints.is_some() || p.mask.is_some() {
                         &self.prisms
                     } else {

@@ -255,7 +255,7 @@ impl StageSpec {
             non_negative("settle_data_change", settle.data_change)?;
         }
         if let Some(e) = s.extend {
-            positive("extend_above", e.above)?;
+            positive("extend_beyond", e.above)?;
         }
         if let Some(p) = self.lbfgs.progress {
             non_negative("progress_decrease", p.decrease)?;
