@@ -7,7 +7,7 @@ use crate::memory;
 use crate::output::{model_error, print_json, write_json, write_options};
 use medial_core::construction::from_shape::{
     template_of_shape, Shape, TemplateFigures, TemplateOptions, Verdict, DEFAULT_ATOMS,
-    MAX_ANGLE_DEG, MAX_MISMATCH_PCT, TARGET_DICE,
+    LEFT_OUT_LIMIT, MAX_ANGLE_DEG, MAX_MISMATCH_PCT, TARGET_DICE,
 };
 use medial_core::construction::Sampling;
 use medial_io::nifti_volume::{write_nifti, NiftiType};
@@ -218,6 +218,15 @@ fn verdict(out: &Path, figures: &TemplateFigures) -> Result<(), CliError> {
             )))
         }
         Ok(()) => {
+            if figures.medial_left_out > LEFT_OUT_LIMIT {
+                tracing::warn!(
+                    "{}: a piece of the shape's medial points holding {:.0} % of it does not \
+                     reach the rest and is left out of the template (a thin wall that tapers \
+                     into a thick one?); the template misses that wall",
+                    out.display(),
+                    100.0 * figures.medial_left_out
+                );
+            }
             if figures.dice < TARGET_DICE {
                 tracing::warn!(
                     "{}: Dice {:.3} against the shape, below the target {TARGET_DICE}",

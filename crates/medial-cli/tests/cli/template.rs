@@ -52,6 +52,8 @@ fn assert_targets(figures: &Value) {
     }
     assert!(angle <= 0.1, "max spoke-normal {angle}°");
     assert!(mismatch <= 0.1, "max spoke mismatch {mismatch} %");
+    // No wall of the shape left out of the sheet (islands of noise hold far less than 1 %).
+    assert!(f(&figures["medial_left_out"]) < 0.01, "{figures}");
     for key in [
         "closed_manifold",
         "outward",

@@ -56,6 +56,11 @@ pub const MARGIN_VOXELS: f64 = 3.0;
 const COARSE_VOXELS: f64 = 96.0;
 /// The Dice of a template against its shape that counts as matching it.
 pub const TARGET_DICE: f64 = 0.95;
+/// The largest share of the shape ([`TemplateFigures::medial_left_out`]) that a piece of its
+/// medial points left out of the sheet may hold in a template that meets its targets: islands
+/// of boundary noise and corners hold far less; a piece of a twentieth of the shape is a wall
+/// whose medial points do not reach the rest (a thin wall tapering into a thick one).
+pub const LEFT_OUT_LIMIT: f64 = 0.05;
 /// The largest spoke–normal angle of a finished template, degrees.
 pub const MAX_ANGLE_DEG: f64 = 0.1;
 /// The largest spoke mismatch of a finished template, %.
@@ -190,6 +195,10 @@ pub struct TemplateFigures {
     pub grid_dims: [usize; 3],
     /// Medial points found (ridge voxel pairs).
     pub medial_points: usize,
+    /// The share of the shape (by the medial points' summed radii) in the largest piece of its
+    /// medial points that does not reach the rest and was left out of the sheet
+    /// ([`ShapeSheet::left_out`]); above [`LEFT_OUT_LIMIT`] the template misses a wall.
+    pub medial_left_out: f64,
     /// Per sheet, the chart it was sampled in: sphere (a bowl) or plane.
     pub chart: Vec<ChartKind>,
     /// Per sheet, the rows of its lattice hexagon either side of its middle row.
@@ -204,7 +213,8 @@ pub struct TemplateFigures {
     pub dice: f64,
     /// Voxel Dice against the input segmentation on its own grid (segmentations only).
     pub dice_input_grid: Option<f64>,
-    /// Whether the figures meet the targets: Dice ≥ [`TARGET_DICE`], constraints ≤
+    /// Whether the figures meet the targets: Dice ≥ [`TARGET_DICE`], at most
+    /// [`LEFT_OUT_LIMIT`] of the shape left out, constraints ≤
     /// [`MAX_ANGLE_DEG`] and ≤ [`MAX_MISMATCH_PCT`], closed, manifold, outward, no
     /// self-intersection.
     pub meets_targets: bool,
@@ -639,6 +649,7 @@ fn figures_of(
     let self_intersection_free = self_intersections(&boundary).is_empty();
     let fold = |f: fn(f64, f64) -> f64, init| metrics.thickness.iter().copied().fold(init, f);
     let meets_targets = dice >= TARGET_DICE
+        && found.left_out <= LEFT_OUT_LIMIT
         && summary.max_spoke_normal_deg <= MAX_ANGLE_DEG
         && summary.max_spoke_mismatch_pct <= MAX_MISMATCH_PCT
         && closed_manifold
@@ -649,6 +660,7 @@ fn figures_of(
         voxel_wanted_mm: None,
         grid_dims: mask.dims(),
         medial_points: found.medial_points.len(),
+        medial_left_out: found.left_out,
         chart: found.lattices.iter().map(|l| l.chart.kind).collect(),
         rings: found.lattices.iter().map(|l| l.rings).collect(),
         stretch: found.lattices.iter().map(|l| l.stretch).collect(),
@@ -748,6 +760,7 @@ mod tests {
             voxel_wanted_mm: None,
             grid_dims: [1, 1, 1],
             medial_points: 0,
+            medial_left_out: 0.0,
             chart: vec![],
             rings: vec![],
             stretch: vec![],

@@ -336,8 +336,9 @@ impl Grid {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::construction::from_shape::LEFT_OUT_LIMIT;
     use crate::construction::skeleton::seam::Seam;
-    use crate::construction::skeleton::{medial_points, MIN_FEATURE_ANGLE_DEG};
+    use crate::construction::skeleton::{medial_pieces, medial_points, MIN_FEATURE_ANGLE_DEG};
     use crate::image::Volume;
     use nalgebra::{Matrix4, Vector4};
 
@@ -389,9 +390,15 @@ mod tests {
         }
 
         fn inside(p: [f64; 2]) -> bool {
+            Self::inside_with(p, Self::RV[0])
+        }
+
+        /// [`Ventricles::inside`] with the RV cavity of radius `rv_cavity` (its free wall
+        /// `RV[1] − rv_cavity` thick).
+        fn inside_with(p: [f64; 2], rv_cavity: f64) -> bool {
             let (lv, rv) = (p[0].hypot(p[1]), Self::rv(p));
             let wall = lv <= Self::LV[1] || rv <= Self::RV[1];
-            let cavity = lv < Self::LV[0] || (rv < Self::RV[0] && lv > Self::LV[1]);
+            let cavity = lv < Self::LV[0] || (rv < rv_cavity && lv > Self::LV[1]);
             wall && !cavity
         }
 
@@ -481,9 +488,14 @@ mod tests {
 
         /// The shape on a grid of voxel `v`.
         fn mask(v: f64) -> Volume {
+            Self::mask_with(v, Self::RV[0])
+        }
+
+        /// The shape with the RV cavity of radius `rv_cavity` on a grid of voxel `v`.
+        fn mask_with(v: f64, rv_cavity: f64) -> Volume {
             let lo = Vec3::new(-23.0, -23.0, -14.0);
             mask(lo, Vec3::new(60.0, 46.0, 28.0), v, |p| {
-                Self::inside([p.x, p.y]) && p.z.abs() <= 12.0
+                Self::inside_with([p.x, p.y], rv_cavity) && p.z.abs() <= 12.0
             })
         }
     }
@@ -512,6 +524,24 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// An RV free wall of 1.5 mm (three 0.5 mm voxels) tapers into the septum where its two
+    /// sides stop facing each other: its medial points do not reach the rest, and the share
+    /// of the shape left out says so (the 4 mm wall of the test above leaves nothing out).
+    #[test]
+    fn a_thin_wall_whose_medial_points_do_not_reach_the_rest_is_reported_left_out() {
+        let share = |rv_cavity: f64| {
+            let (_, left_out) = medial_pieces(
+                &Ventricles::mask_with(0.5, rv_cavity),
+                MIN_FEATURE_ANGLE_DEG,
+            )
+            .unwrap();
+            left_out
+        };
+        let (thick, thin) = (share(Ventricles::RV[0]), share(Ventricles::RV[1] - 1.5));
+        assert!(thick <= 0.01 * LEFT_OUT_LIMIT, "{thick}");
+        assert!(thin > LEFT_OUT_LIMIT, "{thin}");
     }
 
     #[test]

@@ -8,7 +8,7 @@
 //!    ([`FeatureTransform`](crate::image::distance::FeatureTransform));
 //! 2. medial points where the nearest boundary points of two neighbouring voxels make a wide
 //!    angle (a scale-free λ-medial axis), their radius the distance to those boundary points;
-//!    islands dropped ([`ridge::medial_points`]);
+//!    islands dropped, the share of the largest left out said ([`ridge::medial_pieces`]);
 //! 3. a chart of the points: an azimuthal equidistant projection of a fitted sphere (bowls) or
 //!    the principal plane (flat sheets) ([`chart::Chart`]);
 //! 4. the region the points cover in the chart, as a disc of grid cells ([`region`]), mapped
@@ -50,7 +50,7 @@ use region::Region;
 use seam::Seam;
 use stitch::{free_edges, stitch, CUT_RADII, CUT_SPACINGS};
 
-pub use ridge::{medial_points, MedialPoint};
+pub use ridge::{medial_pieces, medial_points, MedialPoint};
 
 /// Default angle between the feature vectors of a medial point's two neighbours, degrees: a
 /// sheet with `|∇r| ≤ cos(55°) ≈ 0.57` keeps its points, the 90° corners of a cut rim do not.
@@ -112,6 +112,10 @@ pub struct ShapeSheet {
     pub sheet: MedialSheet,
     /// The medial points found (after dropping islands).
     pub medial_points: Vec<MedialPoint>,
+    /// The share of the medial points' summed radii that the largest dropped island held
+    /// ([`medial_pieces`]; 0 for points given to [`sheet_of_points`]): about its share of the
+    /// shape's volume left out of the sheet.
+    pub left_out: f64,
     /// How many of them were kept as not on spurs (`ChartedCloud::new`), over all sheets.
     pub spur_free_points: usize,
     /// How each sheet was sampled.
@@ -136,19 +140,20 @@ pub struct ShapeSheet {
 /// seams it reaches, and the seams as polylines ([`Seam::fit`]) sampled as finely as the
 /// sheets' lattices (their mean spacing); the sheets are stitched along them ([`stitch()`]).
 ///
-/// Errors: those of [`medial_points`]; [`Error::Branching`] for a shape of several sheets
+/// Errors: those of [`medial_pieces`]; [`Error::Branching`] for a shape of several sheets
 /// without seams; those of [`Chart::fit`], the chart's region and its harmonic map,
 /// `lattice_sheet` (a shape that is not one simply connected sheet), [`Seam::fit`] and
 /// [`stitch()`]; `InvalidParameter` for a non-positive sampling.
 pub fn sheet_of_mask(mask: &Volume, sampling: Sampling) -> Result<ShapeSheet> {
-    let points = medial_points(mask, MIN_FEATURE_ANGLE_DEG)?;
-    sheet_of_points(points, mask.spacing().mean(), sampling)
+    let (points, left_out) = medial_pieces(mask, MIN_FEATURE_ANGLE_DEG)?;
+    let found = sheet_of_points(points, mask.spacing().mean(), sampling)?;
+    Ok(ShapeSheet { left_out, ..found })
 }
 
 /// The medial sheet through the medial points `points` of a mask of mean voxel `voxel` (mm),
 /// sampled as `sampling` says: [`sheet_of_mask`] after its first step.
 ///
-/// Errors: those of [`sheet_of_mask`] but [`medial_points`]'.
+/// Errors: those of [`sheet_of_mask`] but [`medial_pieces`]'.
 pub fn sheet_of_points(
     points: Vec<MedialPoint>,
     voxel: f64,
@@ -174,6 +179,7 @@ pub fn sheet_of_points(
         sheet: built.sheet,
         spur_free_points: built.spur_free_points,
         medial_points: points,
+        left_out: 0.0,
         lattices: vec![built.lattice],
         border: built.border,
         seams: Vec::new(),
@@ -242,6 +248,7 @@ fn several_sheets(
         sheet: best.sheet,
         spur_free_points: best.built.iter().map(|b| b.spur_free_points).sum(),
         medial_points: points,
+        left_out: 0.0,
         lattices: best.built.into_iter().map(|b| b.lattice).collect(),
         seams: best.seams,
         branching: counts,

@@ -21,7 +21,20 @@ pub struct MedialPoint {
     pub radius: f64,
 }
 
-/// The medial points of the mask `mask` (voxels > ½ inside), largest connected piece only.
+/// The medial points of the mask `mask` (voxels > ½ inside), largest connected piece only:
+/// [`medial_pieces`] without the share it leaves out.
+///
+/// Errors: those of [`medial_pieces`].
+pub fn medial_points(mask: &Volume, min_angle_deg: f64) -> Result<Vec<MedialPoint>> {
+    medial_pieces(mask, min_angle_deg).map(|(points, _)| points)
+}
+
+/// The medial points of the mask `mask` (voxels > ½ inside), largest connected piece only, and
+/// the share of the largest piece left out: its points' summed radii over all points' (each
+/// point stands for about a voxel face of sheet, so this is about its share of the shape's
+/// volume). Small pieces are islands of boundary noise; a large one is a wall whose medial
+/// points do not reach the rest, e.g. a thin wall joined to a thick one where the two sides
+/// stop facing each other, which the sheet built from the largest piece leaves out.
 ///
 /// For every pair of face-neighbouring inside voxels `x, y` with nearest background voxels
 /// `f_x, f_y`, the midpoint `m = (x + y)/2` is a medial point when the feature vectors
@@ -36,7 +49,7 @@ pub struct MedialPoint {
 ///
 /// Errors: `InvalidVolume` for a grid whose axes are not orthogonal (the transform needs them),
 /// a shape touching the border of its grid, or one without medial points.
-pub fn medial_points(mask: &Volume, min_angle_deg: f64) -> Result<Vec<MedialPoint>> {
+pub fn medial_pieces(mask: &Volume, min_angle_deg: f64) -> Result<(Vec<MedialPoint>, f64)> {
     let spacing = orthogonal_spacing(mask)?;
     let dims = mask.dims();
     let inside: Vec<bool> = mask.data().iter().map(|&v| v > 0.5).collect();
@@ -74,14 +87,14 @@ pub fn medial_points(mask: &Volume, min_angle_deg: f64) -> Result<Vec<MedialPoin
             })
         })
         .collect();
-    let points = largest_piece(points, 1.5 * h);
+    let (points, left_out) = largest_piece(points, 1.5 * h);
     if points.is_empty() {
         return Err(Error::InvalidVolume(
             "the shape has no medial points: it is empty or thinner than two voxels everywhere"
                 .into(),
         ));
     }
-    Ok(points)
+    Ok((points, left_out))
 }
 
 /// The voxel sizes along i, j, k (mm), refusing a grid whose axes are not orthogonal.
@@ -126,8 +139,9 @@ fn check_border(inside: &[bool], dims: [usize; 3]) -> Result<()> {
 
 /// The points of the largest piece by total radius `Σ r` (so that thin spurs weigh little), two
 /// points being joined when their cells of size `cell` touch (26-neighbourhood); ties to the
-/// piece with the smallest root. Drops the islands that boundary noise and corners make.
-fn largest_piece(points: Vec<MedialPoint>, cell: f64) -> Vec<MedialPoint> {
+/// piece with the smallest root. Drops the islands that boundary noise and corners make, and
+/// says what share of the whole `Σ r` the largest of them held (0 with one piece).
+fn largest_piece(points: Vec<MedialPoint>, cell: f64) -> (Vec<MedialPoint>, f64) {
     let key = |p: &Vec3| p.map(|c| (c / cell).floor() as i64);
     let mut cells: HashMap<[i64; 3], usize> = HashMap::new();
     let mut cell_of = Vec::with_capacity(points.len());
@@ -156,14 +170,18 @@ fn largest_piece(points: Vec<MedialPoint>, cell: f64) -> Vec<MedialPoint> {
         .copied()
         .max_by(|a, b| size[a].total_cmp(&size[b]).then(b.cmp(a)))
     else {
-        return points;
+        return (points, 0.0);
     };
-    points
-        .into_iter()
-        .zip(root)
+    let whole: f64 = points.iter().map(|p| p.radius).sum();
+    let left_out = (size.iter())
+        .filter(|&(&r, _)| r != best)
+        .map(|(_, &s)| s / whole)
+        .fold(0.0, f64::max);
+    let kept = (points.into_iter().zip(root))
         .filter(|&(_, r)| r == best)
         .map(|(p, _)| p)
-        .collect()
+        .collect();
+    (kept, left_out)
 }
 
 #[cfg(test)]
