@@ -221,10 +221,15 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
             ..
         } = self;
         let (points, scale, cutoff2) = (&points[..], *scale, *cutoff * *cutoff);
+        // Every tile a task of its own, so that a thread out of work takes single tiles from
+        // the others: split only as far as rayon does by default, into an eighth to a quarter
+        // of the tiles on 2 threads, one thread sat idle at the end of a sweep while the other
+        // finished its last piece.
         partials
             .par_chunks_mut(2 * C * layout.block)
             .zip(&layout.tiles)
             .enumerate()
+            .with_max_len(1)
             .for_each(|(t, (buf, &(bi, bj)))| {
                 let rows = layout.range(bi);
                 let mask = match layout.masks.is_empty() {
@@ -244,7 +249,8 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
 
     /// `S(i)` for the slots of each block: the partial sums of its tiles in their order (the
     /// column sums of tiles (J, I), J < I, the row then the column sums of (I, I), the row sums
-    /// of (I, J), J > I), in parallel over blocks when there is enough work.
+    /// of (I, J), J > I), in parallel over blocks, however few: the other threads have just
+    /// finished their tiles and would otherwise wait for the next step's sweep.
     fn reduce(&mut self) {
         let Self {
             layout,
@@ -253,12 +259,8 @@ impl<const F: usize, const C: usize> PairSweep<F, C> {
             ..
         } = self;
         let part_len = C * layout.block;
-        // Blocks per task: enough additions to be worth a task of its own.
-        let per_block = part_len * layout.tiles.len().div_ceil(layout.blocks).max(1);
-        let min_blocks = (1 << 16) / per_block.max(1);
         sums.par_chunks_mut(part_len)
             .zip(&layout.parts)
-            .with_min_len(min_blocks.max(1))
             .for_each(|(block_sums, parts)| {
                 block_sums.fill(0.0);
                 for &p in parts {
@@ -290,7 +292,6 @@ pub(crate) struct Layout {
     /// Rows of a block: a multiple of [`LANES`] that depends on the number of points only, so
     /// that the order of the sums does not depend on the number of threads.
     block: usize,
-    blocks: usize,
     tiles: Vec<(usize, usize)>,
     /// A truncated sweep's masks of the chunk pairs swept: per tile, [`CHUNKS_PER_BLOCK`]
     /// masks, bit `b` of mask `a` set when the pairs of row chunk `a` and column chunk `b`
@@ -405,8 +406,7 @@ impl Layout {
         tiles: Vec<(usize, usize)>,
         masks: Vec<u32>,
     ) -> Self {
-        let blocks = padded.div_ceil(block);
-        let mut parts = vec![Vec::new(); blocks];
+        let mut parts = vec![Vec::new(); padded.div_ceil(block)];
         for (t, &(bi, bj)) in tiles.iter().enumerate() {
             parts[bi].push(2 * t);
             parts[bj].push(2 * t + 1);
@@ -415,7 +415,6 @@ impl Layout {
             slot,
             padded,
             block,
-            blocks,
             tiles,
             masks,
             parts,
