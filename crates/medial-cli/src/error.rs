@@ -62,6 +62,10 @@ pub enum CliError {
     /// written, marked as such. Exit code 4.
     #[error("{0}")]
     ConstraintsNotMet(String),
+    /// `medial template`: the template leaves out part of the shape (a wall whose medial points
+    /// do not reach the rest); it was written with its figures. Exit code 1.
+    #[error("{0}")]
+    Incomplete(String),
     /// `medial check`: the medial points are not the centres of inscribed balls (the sheet
     /// atoms' mean residual passes `--max-residual`); the figures were printed. Exit code 5.
     #[error("{0}")]

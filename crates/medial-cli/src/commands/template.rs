@@ -202,7 +202,8 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
 
 /// The exit of `medial template` by the figures' verdict ([`TemplateFigures::verdict`]): an
 /// unsound boundary is [`CliError::Unsound`] (exit 3), constraints above the targets
-/// [`CliError::ConstraintsNotMet`] (exit 4); a Dice below the target only warns.
+/// [`CliError::ConstraintsNotMet`] (exit 4), a wall of the shape left out of the sheet
+/// [`CliError::Incomplete`] (exit 1); a Dice below the target only warns.
 fn verdict(out: &Path, figures: &TemplateFigures) -> Result<(), CliError> {
     match figures.verdict() {
         Err(Verdict::Unsound(causes)) => Err(CliError::Unsound(format!(
@@ -217,16 +218,15 @@ fn verdict(out: &Path, figures: &TemplateFigures) -> Result<(), CliError> {
                 out.display()
             )))
         }
+        Err(Verdict::WallLeftOut(share)) => Err(CliError::Incomplete(format!(
+            "{}: a piece of the shape's medial points holding {:.0} % of it (more than \
+             {:.0} %) does not reach the rest and is left out of the template: a thin wall that \
+             tapers into a thick one? The template misses that wall (written with its figures)",
+            out.display(),
+            100.0 * share,
+            100.0 * LEFT_OUT_LIMIT
+        ))),
         Ok(()) => {
-            if figures.medial_left_out > LEFT_OUT_LIMIT {
-                tracing::warn!(
-                    "{}: a piece of the shape's medial points holding {:.0} % of it does not \
-                     reach the rest and is left out of the template (a thin wall that tapers \
-                     into a thick one?); the template misses that wall",
-                    out.display(),
-                    100.0 * figures.medial_left_out
-                );
-            }
             if figures.dice < TARGET_DICE {
                 tracing::warn!(
                     "{}: Dice {:.3} against the shape, below the target {TARGET_DICE}",

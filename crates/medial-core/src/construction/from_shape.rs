@@ -252,12 +252,16 @@ pub enum Verdict {
     Unsound(Vec<&'static str>),
     /// Its constraints are above the targets: the largest angle (°) and mismatch (%).
     ConstraintsNotMet(f64, f64),
+    /// It leaves out a wall: the share of the shape in the largest piece of medial points left
+    /// out of its sheet, above [`LEFT_OUT_LIMIT`].
+    WallLeftOut(f64),
 }
 
 impl TemplateFigures {
-    /// `Ok` for a template that can be used: a sound boundary and constraints within
-    /// [`MAX_ANGLE_DEG`] and [`MAX_MISMATCH_PCT`]. A Dice below [`TARGET_DICE`] is not a
-    /// verdict: the template is sound, the figures say how well it matches.
+    /// `Ok` for a template that can be used: a sound boundary, constraints within
+    /// [`MAX_ANGLE_DEG`] and [`MAX_MISMATCH_PCT`], and no wall of the shape left out (at most
+    /// [`LEFT_OUT_LIMIT`]). A Dice below [`TARGET_DICE`] is not a verdict: the template is
+    /// sound and whole, the figures say how well it matches.
     pub fn verdict(&self) -> std::result::Result<(), Verdict> {
         let defects = [
             (self.closed_manifold, "not a closed oriented manifold"),
@@ -274,6 +278,9 @@ impl TemplateFigures {
         let (angle, mismatch) = (self.max_spoke_normal_deg, self.max_spoke_mismatch_pct);
         if !(angle <= MAX_ANGLE_DEG && mismatch <= MAX_MISMATCH_PCT) {
             return Err(Verdict::ConstraintsNotMet(angle, mismatch));
+        }
+        if self.medial_left_out > LEFT_OUT_LIMIT || self.medial_left_out.is_nan() {
+            return Err(Verdict::WallLeftOut(self.medial_left_out));
         }
         Ok(())
     }
@@ -710,15 +717,15 @@ mod tests {
         use crate::fit::spec::{AttachmentSpec, DiceSpec, FitSpec, FlowSettings};
         let mut stage = StageSpec::new("dice", AttachmentSpec::Dice(DiceSpec::default()));
         // An automatic schedule as long as a subject's may get: 5 AL iterations of 600, three
-        // coarse, extended while the constraints halve.
+        // coarse, extended while on course to meet the tolerance.
         stage.schedule.iterations = 5;
         stage.schedule.coarse = Some(CoarseTime {
             time_steps: 5,
             al_iterations: 3,
         });
         stage.schedule.extend = Some(Extend {
-            above: 5e-3,
-            at_most: 4,
+            above: crate::fit::plan::EXTEND_ABOVE,
+            at_most: crate::fit::plan::EXTEND_AT_MOST,
         });
         stage.lbfgs.max_iterations = 600;
         self_fit_schedule(&mut stage);
@@ -818,5 +825,8 @@ mod tests {
                 Err(Verdict::ConstraintsNotMet(..))
             ));
         }
+        let mut missing_a_wall = figures([true; 3], 0.0, 0.0);
+        missing_a_wall.medial_left_out = 0.16;
+        assert_eq!(missing_a_wall.verdict(), Err(Verdict::WallLeftOut(0.16)));
     }
 }
