@@ -301,7 +301,7 @@ pub fn template_of_shape(
     shape.bounds()?;
     let (mask, voxel, wanted) = fine_mask(shape, options.voxel, memory)?;
     let found = sheet_of_mask(&mask, options.sampling)?;
-    let subdivided = found.sheet.loop_subdivide()?;
+    let subdivided = found.subdivided()?;
     let mut fine = subdivided.clone();
     let mut refits = 0;
     loop {

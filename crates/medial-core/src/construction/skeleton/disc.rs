@@ -23,6 +23,7 @@ const SPUR_FRACTION: f64 = 0.5;
 const REFERENCE_QUANTILE: f64 = 0.9;
 
 /// The medial points in chart coordinates, without spurs.
+#[derive(Clone, Debug)]
 pub(super) struct ChartedCloud {
     points: Vec<MedialPoint>,
     coords: Vec<[f64; 2]>,
@@ -78,32 +79,48 @@ impl ChartedCloud {
     }
 }
 
-/// The sheet on `lattice`: each lattice point at its chart position `chart[k]` (the harmonic
-/// map of [`Region::map_onto`](super::region::Region::map_onto)), its position and radius the
-/// values there of the weighted local linear fit `v(q) ≈ v₀ + B (q − q₀)` to the medial
-/// points within `window` mm (doubled up to [`WINDOW_DOUBLINGS`] times where it holds fewer
-/// than [`MIN_POINTS`]; weights `exp(−|q − q₀|²/(2 (window/2)²))`, then a second pass
+/// The weighted local linear fit of position and radius to a sheet's medial points in its
+/// chart: the value at a chart position `q₀` of `v(q) ≈ v₀ + B (q − q₀)` fitted to the points
+/// within `window` mm (doubled up to [`WINDOW_DOUBLINGS`] times where it holds fewer than
+/// [`MIN_POINTS`]; weights `exp(−|q − q₀|²/(2 (window/2)²))`, then a second pass
 /// down-weighting points off the first fit by `1/(1 + (d/2h)²)`, `h` = `voxel`), which is
 /// unbiased at the rim where the window is one-sided.
-///
-/// Errors: `InvalidVolume` when a point has fewer than [`MIN_POINTS`] points in its widest
-/// window (a hole in the sheet); those of [`MedialSheet::new`].
-pub(super) fn lattice_sheet(
-    cloud: &ChartedCloud,
-    lattice: &Lattice,
-    chart: &[[f64; 2]],
+#[derive(Clone, Debug)]
+pub(super) struct SheetFit {
+    cloud: ChartedCloud,
+    buckets: Buckets,
     window: f64,
     voxel: f64,
-) -> Result<MedialSheet> {
-    let widest = window * f64::from(1u32 << WINDOW_DOUBLINGS);
-    let buckets = Buckets::new(&cloud.coords, widest);
-    let mut points = Vec::with_capacity(chart.len());
-    let mut radius = Vec::with_capacity(chart.len());
-    for &q0 in chart {
+}
+
+impl SheetFit {
+    /// The fit to `cloud` with `window` (mm) on a mask of voxel `voxel` (mm).
+    pub(super) fn new(cloud: ChartedCloud, window: f64, voxel: f64) -> Self {
+        let widest = window * f64::from(1u32 << WINDOW_DOUBLINGS);
+        let buckets = Buckets::new(&cloud.coords, widest);
+        Self {
+            cloud,
+            buckets,
+            window,
+            voxel,
+        }
+    }
+
+    /// The medial points fitted to (without spurs).
+    pub(super) fn cloud(&self) -> &ChartedCloud {
+        &self.cloud
+    }
+
+    /// Position (mm) and radius (mm) of the sheet at chart position `q0`.
+    ///
+    /// Errors: `InvalidVolume` when `q0` has fewer than [`MIN_POINTS`] points in its widest
+    /// window (a hole in the sheet) or they lie on a line.
+    pub(super) fn at(&self, q0: [f64; 2]) -> Result<(Vec3, f64)> {
+        let widest = self.window * f64::from(1u32 << WINDOW_DOUBLINGS);
         let (near, window) = (0..=WINDOW_DOUBLINGS)
             .map(|d| {
-                let w = window * f64::from(1u32 << d);
-                (buckets.within(&cloud.coords, q0, w), w)
+                let w = self.window * f64::from(1u32 << d);
+                (self.buckets.within(&self.cloud.coords, q0, w), w)
             })
             .find(|(near, w)| near.len() >= MIN_POINTS || *w >= widest)
             .expect("the widest window ends the search");
@@ -116,15 +133,28 @@ pub(super) fn lattice_sheet(
                 near.len()
             )));
         }
-        let (p, rad) = local_fit(cloud, &near, q0, window, voxel)?;
-        points.push(p);
-        radius.push(rad);
+        local_fit(&self.cloud, &near, q0, window, self.voxel)
     }
+}
+
+/// The sheet on `lattice`: each lattice point at its chart position `chart[k]` (the harmonic
+/// map of [`Region::map_onto`](super::region::Region::map_onto)), its position and radius
+/// those of `fit` there ([`SheetFit::at`]).
+///
+/// Errors: those of [`SheetFit::at`] and [`MedialSheet::new`].
+pub(super) fn lattice_sheet(
+    fit: &SheetFit,
+    lattice: &Lattice,
+    chart: &[[f64; 2]],
+) -> Result<MedialSheet> {
+    let (points, radius) = (chart.iter())
+        .map(|&q0| fit.at(q0))
+        .collect::<Result<(Vec<_>, Vec<_>)>>()?;
     MedialSheet::new(points, lattice.triangles.clone(), radius)
 }
 
 /// The value at `q0` of the weighted local linear fit of position and radius (see
-/// [`lattice_sheet`]).
+/// [`SheetFit`]).
 fn local_fit(
     cloud: &ChartedCloud,
     near: &[usize],
@@ -190,6 +220,7 @@ fn local_fit(
 }
 
 /// Chart points bucketed in square cells of a given size.
+#[derive(Clone, Debug)]
 struct Buckets {
     cell: f64,
     cells: HashMap<[i64; 2], Vec<usize>>,

@@ -44,7 +44,7 @@ use crate::image::Volume;
 use crate::{Error, Result, Vec3};
 use branching::{branching, Branches, Branching};
 use chart::Chart;
-use disc::{lattice_sheet, ChartedCloud};
+use disc::{lattice_sheet, ChartedCloud, SheetFit};
 use lattice::Lattice;
 use region::Region;
 use seam::Seam;
@@ -130,6 +130,48 @@ pub struct ShapeSheet {
     /// The sheet (`0 .. sheets`, in the order of `lattices`) of each of the sheet's points;
     /// `None` on a seam.
     pub sheet_of_point: Vec<Option<usize>>,
+    /// Each sheet's local fit to its medial points, in the order of `lattices`.
+    fits: Vec<SheetFit>,
+}
+
+impl ShapeSheet {
+    /// The sheet after one Loop subdivision ([`MedialSheet::loop_subdivide`]), each point off
+    /// the seams placed again, position and radius, by its sheet's local fit to the medial
+    /// points at its place in the sheet's chart — the fit that placed the lattice's points.
+    ///
+    /// Loop subdivision approximates: it moves every point towards the mean of its neighbours,
+    /// by about a quarter of the lattice spacing squared times the sheet's curvature. On a
+    /// coarse lattice of a curved thin wall that is more than the wall's half thickness (the
+    /// biv-me heart's right ventricle: half its subdivided points left the wall), so the
+    /// subdivision only gives the atoms' connectivity and regular spacing, and the medial
+    /// points their places. The band the stitching triangulated along each seam (the points
+    /// of the triangles with a corner on a seam, and the points subdivision puts between
+    /// them) stays as subdivided: its width was chosen for the subdivided band's points
+    /// ([`CUT_RADII`]), and the seams' points are polylines fitted to their own medial points.
+    ///
+    /// Errors: those of [`MedialSheet::loop_subdivide`], of the fit (a point whose chart
+    /// window holds too few medial points) and of [`MedialSheet::new`] (a triangle the new
+    /// places make degenerate).
+    pub fn subdivided(&self) -> Result<MedialSheet> {
+        let subdivided = self.sheet.loop_subdivide()?;
+        // The band: the points of the triangles with a corner on a seam.
+        let mut off_band = self.sheet_of_point.clone();
+        for t in self.sheet.triangles() {
+            if t.iter().any(|&v| self.sheet_of_point[v].is_none()) {
+                t.iter().for_each(|&v| off_band[v] = None);
+            }
+        }
+        let labels = self.sheet.subdivided_labels(&off_band);
+        let mut points = subdivided.points().to_vec();
+        let mut radius = subdivided.radius().to_vec();
+        for ((p, r), label) in points.iter_mut().zip(&mut radius).zip(&labels) {
+            if let Some(k) = *label {
+                let (lattice, fit) = (&self.lattices[k], &self.fits[k]);
+                (*p, *r) = fit.at(lattice.chart.coords(p))?;
+            }
+        }
+        MedialSheet::new(points, subdivided.triangles().to_vec(), radius)
+    }
 }
 
 /// The medial sheet of the shape `mask` (voxels > ½ inside, on a grid with orthogonal axes and
@@ -177,13 +219,14 @@ pub fn sheet_of_points(
     Ok(ShapeSheet {
         sheet_of_point: vec![Some(0); built.sheet.points().len()],
         sheet: built.sheet,
-        spur_free_points: built.spur_free_points,
+        spur_free_points: built.fit.cloud().len(),
         medial_points: points,
         left_out: 0.0,
         lattices: vec![built.lattice],
         border: built.border,
         seams: Vec::new(),
         branching: counts,
+        fits: vec![built.fit],
     })
 }
 
@@ -246,10 +289,11 @@ fn several_sheets(
         sheet_of_point: best.sheet_of_point,
         border: free_edge_points(&best.sheet),
         sheet: best.sheet,
-        spur_free_points: best.built.iter().map(|b| b.spur_free_points).sum(),
+        spur_free_points: best.built.iter().map(|b| b.fit.cloud().len()).sum(),
         medial_points: points,
         left_out: 0.0,
-        lattices: best.built.into_iter().map(|b| b.lattice).collect(),
+        lattices: best.built.iter().map(|b| b.lattice.clone()).collect(),
+        fits: best.built.into_iter().map(|b| b.fit).collect(),
         seams: best.seams,
         branching: counts,
     })
@@ -362,7 +406,8 @@ struct SampledSheet {
     border: Vec<usize>,
     /// The lattice's mean spacing on the sheet (mm).
     spacing: f64,
-    spur_free_points: usize,
+    /// The local fit that placed the lattice's points.
+    fit: SheetFit,
 }
 
 impl ChartedSheet {
@@ -400,7 +445,8 @@ impl ChartedSheet {
         let lift = |q: [f64; 2]| chart.on_surface(q);
         let region = Region::of(&usable(chart, &cloud), cell, closing, &lift)?;
         let in_chart = region.map_onto(&lattice)?;
-        let sheet = lattice_sheet(&cloud, &lattice, &in_chart, window, voxel)?;
+        let fit = SheetFit::new(cloud, window, voxel);
+        let sheet = lattice_sheet(&fit, &lattice, &in_chart)?;
         Ok(SampledSheet {
             sheet,
             lattice: SheetLattice {
@@ -410,7 +456,7 @@ impl ChartedSheet {
             },
             border: lattice.border,
             spacing,
-            spur_free_points: cloud.len(),
+            fit,
         })
     }
 }
