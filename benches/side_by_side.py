@@ -47,6 +47,7 @@ KINETIC_WEIGHT = 0.05
 SHIFT = np.array([1.0, -0.5, 0.25])
 CASES = ["t001", "hippo2000", "hippo6611"]
 ROOT = pathlib.Path(__file__).resolve().parent.parent
+TARGET = pathlib.Path(os.environ.get("CARGO_TARGET_DIR", ROOT / "target"))
 
 
 def read_case(path):
@@ -149,7 +150,7 @@ def keops_value_and_grad(q, sigma):
 
 def medial_seconds(name, k):
     estimates = (
-        ROOT / "target/criterion/value_and_gradient_N40/fused" / f"{name}_k{k}" / "new/estimates.json"
+        TARGET / "criterion/value_and_gradient_N40/fused" / f"{name}_k{k}" / "new/estimates.json"
     )
     return json.loads(estimates.read_text())["median"]["point_estimate"] * 1e-9
 
@@ -159,7 +160,7 @@ def fit_seconds_per_evaluation(workdir):
     KeOps hippocampus in N = 40 steps (automatic settings otherwise)."""
     data = ROOT.parent / "shared/data/keops"
     subprocess.run(["cargo", "build", "--release", "-p", "medial-cli"], cwd=ROOT, check=True)
-    medial = ROOT / "target/release/medial"
+    medial = TARGET / "release/medial"
     template, target = data / "hippos_reduc_source.vtk", workdir / "warped.vtk"
     write_warped(template, target)
     auto = workdir / "automatic"
