@@ -61,24 +61,31 @@ def walls(out, frames):
     template_thickness = {a: 2 * statistics.fmean(r) for a, r in spokes.items()}
     rows = []
     for k in range(1, frames + 1):
+        scale = 1 - 0.1 * k / frames
+        # The planted ratio per atom: the spoke factor applied (thickening.csv) times the
+        # affine part's scaling.
+        with open(f"{out}/frame{k}/thickening.csv") as f:
+            planted = {int(r["atom"]): float(r["factor"]) * scale for r in csv.DictReader(f)}
         with open(f"{out}/fit{k}/atoms.csv") as f:
-            ratios = {}
+            ratios, truth = {}, {}
             for r in csv.DictReader(f):
                 a = int(r["atom"])
                 t0, t1 = template_thickness[a], float(r["thickness_t1"])
                 ratios.setdefault(wall[a], []).append(t1 / t0)
+                truth.setdefault(wall[a], []).append(planted[a])
         with open(f"{out}/fit{k}/summary.json") as f:
             fit = json.load(f)
         for w in sorted(ratios):
-            v = ratios[w]
+            v, p = ratios[w], truth[w]
             rows.append({
                 "frame": k,
-                "planted_ratio": 1 - 0.1 * k / frames,
+                "planted_ratio": statistics.fmean(p),
                 "wall": "seam" if w < 0 else f"sheet {w}",
                 "atoms": len(v),
                 "mean_ratio": statistics.fmean(v),
                 "min_ratio": min(v),
                 "max_ratio": max(v),
+                "mean_abs_error": statistics.fmean(abs(a - b) for a, b in zip(v, p)),
                 "fit_voxel_dice": fit["final"]["voxel_dice"],
                 "fit_max_angle_deg": fit["final"]["max_spoke_normal_deg"],
                 "fit_max_mismatch_pct": fit["final"]["max_spoke_mismatch_pct"],
@@ -87,12 +94,13 @@ def walls(out, frames):
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    print("| frame | wall | atoms | planted ratio | thickness ratio mean (min–max) | fit voxel Dice |")
-    print("|---|---|---|---|---|---|")
+    print("| frame | wall | atoms | planted ratio (mean) | fitted ratio mean (min–max) | "
+          "mean per-atom error | fit voxel Dice |")
+    print("|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['frame']} | {r['wall']} | {r['atoms']} | {r['planted_ratio']:.3f} | "
               f"{r['mean_ratio']:.3f} ({r['min_ratio']:.3f}–{r['max_ratio']:.3f}) | "
-              f"{r['fit_voxel_dice']:.3f} |")
+              f"{r['mean_abs_error']:.3f} | {r['fit_voxel_dice']:.3f} |")
     series = {"file-series-version": "1.0",
               "files": [{"name": "template.vtk", "time": 0}] +
                        [{"name": f"fit{k}/fitted_template.vtk", "time": k}
@@ -103,18 +111,21 @@ def walls(out, frames):
 
 
 def plot(out, rows, frames):
-    """walls.svg: the mean thickness ratio of each wall over the frames."""
-    w, h, m = 480, 320, 50
-    lo = min(1.0, min(r["mean_ratio"] for r in rows)) - 0.05
-    hi = max(r["mean_ratio"] for r in rows) + 0.05
-    x = lambda k: m + (w - 2 * m) * k / frames
+    """walls.svg: the mean thickness ratio of each wall over the frames, fitted (solid) and
+    planted (dashed)."""
+    w, h, m, labels = 560, 320, 50, 80
+    values = [r[k] for r in rows for k in ("mean_ratio", "planted_ratio")]
+    lo = min(1.0, min(values)) - 0.05
+    hi = max(values) + 0.05
+    x = lambda k: m + (w - 2 * m - labels) * k / frames
     y = lambda v: h - m - (h - 2 * m) * (v - lo) / (hi - lo)
     colours = ["#e6194b", "#3cb44b", "#0082c8", "#888888"]
     parts = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{w}" height="{h}">',
              f'<rect width="{w}" height="{h}" fill="white"/>',
-             f'<line x1="{m}" y1="{h - m}" x2="{w - m}" y2="{h - m}" stroke="black"/>',
+             f'<line x1="{m}" y1="{h - m}" x2="{w - m - labels}" y2="{h - m}" stroke="black"/>',
              f'<line x1="{m}" y1="{m}" x2="{m}" y2="{h - m}" stroke="black"/>',
-             f'<text x="{w / 2}" y="{h - 10}" text-anchor="middle">frame (0: the template)</text>',
+             f'<text x="{(w - labels) / 2}" y="{h - 10}" text-anchor="middle">frame (0: the template; '
+             f'dashed: planted)</text>',
              f'<text x="12" y="{h / 2}" transform="rotate(-90 12 {h / 2})" '
              f'text-anchor="middle">mean thickness ratio</text>']
     for k in range(frames + 1):
@@ -127,7 +138,12 @@ def plot(out, rows, frames):
         path = " ".join(f"{x(k):.1f},{y(v):.1f}" for k, v in pts)
         c = colours[i % len(colours)]
         parts.append(f'<polyline points="{path}" fill="none" stroke="{c}" stroke-width="2"/>')
-        parts.append(f'<text x="{w - m + 4}" y="{y(pts[-1][1]) + 4}" fill="{c}">{name}</text>')
+        planted = [(0, 1.0)] + [(r["frame"], r["planted_ratio"]) for r in rows
+                                if r["wall"] == name]
+        dashed = " ".join(f"{x(k):.1f},{y(v):.1f}" for k, v in planted)
+        parts.append(f'<polyline points="{dashed}" fill="none" stroke="{c}" stroke-width="1" '
+                     f'stroke-dasharray="4 3"/>')
+        parts.append(f'<text x="{x(frames) + 6}" y="{y(pts[-1][1]) + 4}" fill="{c}">{name}</text>')
     parts.append("</svg>")
     with open(f"{out}/walls.svg", "w") as f:
         f.write("\n".join(parts))

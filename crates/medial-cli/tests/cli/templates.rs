@@ -562,6 +562,20 @@ fn synth_stress_options_thicken_the_wall_and_degrade_the_segmentation() {
             .collect()
     };
     assert!(factors(&thick_out).iter().all(|&x| x == 1.3));
+    assert_eq!(thick["stress"]["thicken_limited_atoms"].as_u64(), Some(0));
+    // Past the focal distance of the toy's curled sheets the wall as asked would cross itself:
+    // the change is halved at the atoms involved, said, and their factors written.
+    let (limited, limited_out) = case(
+        "limited",
+        &["--rotate", "0", "--shift", "0", "--thicken", "2.3"],
+    );
+    let k = factors(&limited_out);
+    let n = limited["stress"]["thicken_limited_atoms"].as_u64().unwrap() as usize;
+    assert!(n > 0 && n < k.len() / 2, "{n} of {} atoms limited", k.len());
+    assert_eq!(k.iter().filter(|&&x| x < 2.3).count(), n);
+    assert!(k.iter().all(|&x| x > 1.0 && x <= 2.3));
+    let least = f(&limited["stress"]["thicken_least_share"]);
+    assert!(least > 0.0 && least <= 0.5 + 1e-12, "{least}");
     // A regional bump: factor 2 at its atom, 1 beyond its radius, atoms in it counted.
     let (region, region_out) = case(
         "region",
@@ -601,8 +615,6 @@ fn synth_stress_options_thicken_the_wall_and_degrade_the_segmentation() {
     for (options, needle) in [
         (&["--thicken", "0"][..], "--thicken"),
         (&["--flip", "1.5"][..], "--flip"),
-        // Past the focal distance of the toy's curled sheets: a wall that crosses itself.
-        (&["--thicken", "2.3"][..], "intersects itself"),
         (
             &["--thicken-region", "2", "--region-atom", "100000"][..],
             "--region-atom 100000",

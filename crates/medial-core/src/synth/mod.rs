@@ -43,5 +43,7 @@ pub use shape::{
     CUP_RADIUS_SEPTUM, CUP_RINGS, TOY_CELLS, TOY_CURL, TOY_LENGTH, TOY_RADIUS, TOY_WIDTH,
 };
 pub use sheets::{parameter_grid, ParameterGrid};
-pub use stress::{degrade, seeded_directions, Degradation, Degraded, Region, Thickening};
+pub use stress::{
+    degrade, seeded_directions, Degradation, Degraded, Region, Thickened, Thickening, LIMIT_ROUNDS,
+};
 pub use warp::Warp;

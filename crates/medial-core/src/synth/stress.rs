@@ -93,31 +93,88 @@ impl Thickening {
     }
 
     /// The boundary of `template` with every spoke scaled by its atom's factor about its medial
-    /// point (same triangles, same point order), mm.
+    /// point (same triangles, same point order), mm, limited where the sheet cannot hold it.
     ///
-    /// Errors: a thickened boundary that intersects itself (a factor too large for the sheet's
-    /// curvature: the offset of a curved sheet folds at its focal distance, so such a wall is
-    /// no shape, and its rasterization no target); those of [`TriMesh::new`].
-    pub fn boundary(&self, template: &MedialTemplate) -> Result<TriMesh> {
-        let factors = self.atom_factors(template);
+    /// The offset of a curved sheet folds at its focal distance, and two sheets meeting at a
+    /// seam at a narrow angle meet sooner: a wall thickened past that crosses itself, which is
+    /// no shape. Where the thickened boundary crosses itself, the change asked at the atoms of
+    /// the crossing triangles is halved (a factor `f` becomes `1 + (f − 1)/2`), and again, up
+    /// to [`LIMIT_ROUNDS`] times; the factors kept are the truth of the case, per atom
+    /// ([`Thickened::factors`]), and the atoms limited are listed.
+    ///
+    /// Errors: a boundary that still crosses itself with the change at those atoms cut to
+    /// 2^−[`LIMIT_ROUNDS`] of it (the template's own boundary crosses itself); those of
+    /// [`TriMesh::new`].
+    pub fn boundary(&self, template: &MedialTemplate) -> Result<Thickened> {
+        let asked = self.atom_factors(template);
+        let mut factors = asked.clone();
         let medial = template.medial_points();
-        let points = template
-            .boundary_points()
-            .iter()
-            .zip(template.medial_index())
-            .map(|(b, &atom)| medial[atom] + factors[atom] * (b - medial[atom]))
-            .collect();
-        let mesh = TriMesh::new(points, template.boundary_triangles().to_vec())?;
-        let crossing = self_intersections(&mesh);
-        if let Some((f, g)) = crossing.first() {
-            let most = factors.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            return Err(Error::InvalidParameter(format!(
-                "the wall thickened by up to {most:.3}× intersects itself ({} pairs of \
-                 triangles, e.g. {f} and {g}): too thick for the sheet's curvature",
-                crossing.len()
-            )));
+        let atom_of = template.medial_index();
+        let mut round = 0;
+        loop {
+            let points = (template.boundary_points().iter().zip(atom_of))
+                .map(|(b, &atom)| medial[atom] + factors[atom] * (b - medial[atom]))
+                .collect();
+            let mesh = TriMesh::new(points, template.boundary_triangles().to_vec())?;
+            let crossing = self_intersections(&mesh);
+            let Some(&(f, g)) = crossing.first() else {
+                let limited = (0..factors.len())
+                    .filter(|&a| factors[a] != asked[a])
+                    .collect();
+                return Ok(Thickened {
+                    mesh,
+                    factors,
+                    limited,
+                });
+            };
+            if round == LIMIT_ROUNDS {
+                let most = asked.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                return Err(Error::InvalidParameter(format!(
+                    "the wall thickened by up to {most:.3}× intersects itself ({} pairs of \
+                     triangles, e.g. {f} and {g}) even with the change cut to 1/{} of it \
+                     there: the template's own boundary crosses itself",
+                    crossing.len(),
+                    1u64 << LIMIT_ROUNDS
+                )));
+            }
+            let mut atoms: Vec<usize> = (crossing.iter())
+                .flat_map(|&(f, g)| [f, g])
+                .flat_map(|t| mesh.triangles()[t])
+                .map(|b| atom_of[b])
+                .collect();
+            atoms.sort_unstable();
+            atoms.dedup();
+            for a in atoms {
+                factors[a] = 1.0 + 0.5 * (factors[a] - 1.0);
+            }
+            round += 1;
         }
-        Ok(mesh)
+    }
+}
+
+/// How many times at most [`Thickening::boundary`] halves the change asked at the atoms of
+/// crossing triangles: down to 1/1024 of it.
+pub const LIMIT_ROUNDS: u32 = 10;
+
+/// A thickened wall ([`Thickening::boundary`]).
+#[derive(Clone, Debug)]
+pub struct Thickened {
+    /// The boundary, mm (the template's triangles and point order).
+    pub mesh: TriMesh,
+    /// Each atom's factor as applied: as asked, or limited where the wall crossed itself.
+    pub factors: Vec<f64>,
+    /// The atoms whose factor was limited, ascending.
+    pub limited: Vec<usize>,
+}
+
+impl Thickened {
+    /// The smallest share of the change asked that a limited atom kept (1 when none was
+    /// limited): `(f − 1)/(f_asked − 1)`.
+    pub fn least_share(&self, thickening: &Thickening, template: &MedialTemplate) -> f64 {
+        let asked = thickening.atom_factors(template);
+        (self.limited.iter())
+            .map(|&a| (self.factors[a] - 1.0) / (asked[a] - 1.0))
+            .fold(1.0, f64::min)
     }
 }
 
@@ -275,16 +332,54 @@ mod tests {
         let case = SyntheticCase::build(Shape::Toy).unwrap();
         let t = case.template();
         let thick = Thickening::new(1.3, None).unwrap();
-        let boundary = thick.boundary(t).unwrap();
+        let thickened = thick.boundary(t).unwrap();
+        assert!(thickened.limited.is_empty());
+        assert!(thickened.factors.iter().all(|&f| f == 1.3));
+        let boundary = thickened.mesh;
         for (i, (b, &atom)) in boundary.points().iter().zip(t.medial_index()).enumerate() {
             let m = t.medial_points()[atom];
             let before = (t.boundary_points()[i] - m).norm();
             assert!(((b - m).norm() - 1.3 * before).abs() < 1e-12 * (1.0 + before));
         }
-        // Past the focal distance of the toy's sheets at its seam (about ×1.4) the wall crosses
-        // itself: no shape, refused.
-        let err = Thickening::new(1.7, None).unwrap().boundary(t).unwrap_err();
-        assert!(err.to_string().contains("intersects itself"), "{err}");
+    }
+
+    #[test]
+    fn a_thickening_past_the_focal_distance_is_limited_where_the_wall_would_cross_itself() {
+        let case = SyntheticCase::build(Shape::Toy).unwrap();
+        let t = case.template();
+        // Past the focal distance of the toy's sheets at its seam (about ×1.4) the wall as
+        // asked crosses itself; the change is halved at the atoms of the crossing triangles.
+        let thick = Thickening::new(1.7, None).unwrap();
+        let asked: Vec<usize> = (0..t.medial_points().len()).collect();
+        let scaled = |factors: &[f64]| -> TriMesh {
+            let points = (t.boundary_points().iter().zip(t.medial_index()))
+                .map(|(b, &a)| t.medial_points()[a] + factors[a] * (b - t.medial_points()[a]))
+                .collect();
+            TriMesh::new(points, t.boundary_triangles().to_vec()).unwrap()
+        };
+        assert!(!self_intersections(&scaled(&vec![1.7; asked.len()])).is_empty());
+        let thickened = thick.boundary(t).unwrap();
+        assert!(self_intersections(&thickened.mesh).is_empty());
+        assert_eq!(scaled(&thickened.factors).points(), thickened.mesh.points());
+        let limited = &thickened.limited;
+        assert!(
+            !limited.is_empty() && limited.len() < asked.len() / 2,
+            "{limited:?}"
+        );
+        for (a, &f) in thickened.factors.iter().enumerate() {
+            if limited.contains(&a) {
+                // 1 + 0.7/2^k for some k ≥ 1.
+                let k = (0.7 / (f - 1.0)).log2();
+                assert!(
+                    k >= 1.0 - 1e-9 && (k - k.round()).abs() < 1e-9,
+                    "atom {a}: {f}"
+                );
+            } else {
+                assert_eq!(f, 1.7);
+            }
+        }
+        let least = thickened.least_share(&thick, t);
+        assert!(least > 0.0 && least <= 0.5 + 1e-12, "{least}");
     }
 
     #[test]

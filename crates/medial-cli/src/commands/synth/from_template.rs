@@ -20,7 +20,7 @@ use medial_core::mesh::PrincipalAxes;
 use medial_core::model::template::MedialTemplate;
 use medial_core::synth::{
     degrade, seeded_directions, target_boundary, target_surface, Degradation, Degraded, Region,
-    Thickening, Warp,
+    Thickened, Thickening, Warp,
 };
 use medial_core::Vec3;
 use nalgebra::{Matrix4, Rotation3, Unit};
@@ -78,7 +78,9 @@ pub struct WarpArgs {
     #[arg(long, value_name = "MM", requires = "from", conflicts_with = "affine")]
     pub shift: Option<f64>,
     /// With --from: every spoke of the template scaled by this factor about its medial point
-    /// before the warp (a thicker or thinner wall, not a larger shape) [default: 1].
+    /// before the warp (a thicker or thinner wall, not a larger shape); where the wall would
+    /// cross itself the change is halved at the atoms involved until it does not (a warning
+    /// says how many; thickening.csv has every atom's factor applied) [default: 1].
     #[arg(long, value_name = "FACTOR", requires = "from")]
     pub thicken: Option<f64>,
     /// With --from: the spokes scaled by this factor at --region-atom, by 1 from
@@ -181,6 +183,11 @@ struct StressFigures {
     region_factor: Option<f64>,
     /// Atoms within the region (factor changed by the bump).
     region_atoms: usize,
+    /// Atoms whose factor was limited where the wall as asked crossed itself (their factors
+    /// in thickening.csv).
+    thicken_limited_atoms: usize,
+    /// The smallest share of the change asked that a limited atom kept (1: none limited).
+    thicken_least_share: f64,
     boundary_voxels: usize,
     flipped_voxels: usize,
     hole_voxels: usize,
@@ -191,13 +198,14 @@ struct StressFigures {
 impl StressFigures {
     fn of(
         args: &Options<'_>,
-        thickening: Option<&Thickening>,
+        thickening: Option<(&Thickening, &Thickened)>,
         template: &MedialTemplate,
         degraded: Option<Degraded>,
     ) -> Option<Self> {
         if thickening.is_none() && degraded.is_none() {
             return None;
         }
+        let (thickening, thickened) = (thickening.map(|t| t.0), thickening.map(|t| t.1));
         let region = thickening.and_then(|t| t.region());
         Some(Self {
             thicken: thickening.map_or(1.0, |t| t.global()),
@@ -211,6 +219,9 @@ impl StressFigures {
                     .filter(|m| (*m - r.centre).norm() < r.radius_mm)
                     .count()
             }),
+            thicken_limited_atoms: thickened.map_or(0, |t| t.limited.len()),
+            thicken_least_share: (thickening.zip(thickened))
+                .map_or(1.0, |(asked, t)| t.least_share(asked, template)),
             boundary_voxels: degraded.as_ref().map_or(0, |d| d.boundary_voxels),
             flipped_voxels: degraded.as_ref().map_or(0, |d| d.flipped),
             hole_voxels: degraded.as_ref().map_or(0, |d| d.cleared),
@@ -253,12 +264,16 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
     let axes = PrincipalAxes::of(boundary.points()).map_err(in_template)?;
     let warp = build_warp(args, &axes)?;
     let thickening = thickening(args, &template, &axes)?;
-    let walled = match &thickening {
-        Some(t) => t
-            .boundary(&template)
-            .map_err(|e| CliError::Input(format!("--thicken / --thicken-region: {e}")))?,
-        None => boundary.clone(),
+    let thickened = match &thickening {
+        Some(t) => Some(
+            t.boundary(&template)
+                .map_err(|e| CliError::Input(format!("--thicken / --thicken-region: {e}")))?,
+        ),
+        None => None,
     };
+    let walled = thickened
+        .as_ref()
+        .map_or(boundary.clone(), |t| t.mesh.clone());
     let target = target_boundary(&walled, &warp).map_err(in_template)?;
     let surface = target_surface(&walled, &warp).map_err(in_template)?;
     let image = target_image(&surface, args.spacing, args.margin)?;
@@ -283,8 +298,17 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
         ],
     }
     .write(args.out)?;
-    if let Some(t) = &thickening {
-        write_factors(&args.out.join("thickening.csv"), &t.atom_factors(&template))?;
+    if let Some(t) = &thickened {
+        write_factors(&args.out.join("thickening.csv"), &t.factors)?;
+        if let Some(asked) = thickening.as_ref().filter(|_| !t.limited.is_empty()) {
+            tracing::warn!(
+                "the thickening was limited at {} atoms (to {:.0} % of the change asked at \
+                 least), where the wall as asked crossed itself; thickening.csv has the factors \
+                 applied",
+                t.limited.len(),
+                100.0 * t.least_share(asked, &template)
+            );
+        }
     }
     let affine = nalgebra::Affine3::from_matrix_unchecked(warp.affine());
     let moved = |p: &Vec3| affine.transform_point(&(*p).into()).coords;
@@ -307,7 +331,12 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
         template_file: args.template.into(),
         out: args.out.into(),
         warp: figures(args, &warp, &axes, walled.points()),
-        stress: StressFigures::of(args, thickening.as_ref(), &template, degradation),
+        stress: StressFigures::of(
+            args,
+            thickening.as_ref().zip(thickened.as_ref()),
+            &template,
+            degradation,
+        ),
         displacement_mean_mm,
         displacement_max_mm,
         beyond_affine_mean_mm,
