@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # A biventricular study from one command (issue 30): the medial template of biv-me's template
 # heart (a 1 mm segmentation; three sheets — LV free wall, RV free wall, septum — meeting along
-# the RV insertion seam), a synthetic cycle made from it (walls thickened by up to 1.575, the
-# LV's mean ED -> ES ratio in examples/lv, limited by the tool where a wall would cross itself;
+# the RV insertion seam), a synthetic cycle made from it (walls thickened by up to 1.575, about
+# the LV's ED -> ES ratio: the CAP meshes' own 1.53 in examples/lv, limited by the tool where a wall would cross itself;
 # shrunk towards the centre by up to 10 %; twisted up to 12 degrees: every atom's thickness
 # change known), each frame fitted by the automatic fit, and the per-atom thickness change over
 # the cycle by wall against the planted one.

@@ -6,13 +6,18 @@
 //!   `DATA/surface_face.csv`: the 1-based triangles of one 841-point surface, open at the base)
 //!   as closed outward meshes `OUT/ed_wall.vtk`, `OUT/es_wall.vtk`: the epicardium, the
 //!   endocardium reversed (facing the cavity) and a rim of two triangles per base edge.
-//! - `cargo run --release --example lv -- thickening ED_MEDIAL.vtk ES_MEDIAL.vtk OUT.vtk`: the
-//!   wall thickening per atom between the medial sheet of the template (ED) and of the fit
-//!   (ES), both with a `Thickness` point array (mm): writes `OUT.vtk` (the ES sheet with
-//!   `ThicknessED`, `ThicknessES`, `ThickeningRatio` = ES/ED) and prints the mean, min and max
-//!   ratio as JSON.
+//! - `cargo run --release --example lv -- thickening ED_TEMPLATE.vtk ES_MEDIAL.vtk OUT.vtk`: the
+//!   wall thickening per atom between the template itself (ED: its thickness, 2 × mean spoke,
+//!   as the template file has it) and the medial sheet at the fit's last time point (ES, its
+//!   `Thickness` point array, mm): writes `OUT.vtk` (the ES sheet with `ThicknessED`,
+//!   `ThicknessES`, `ThickeningRatio` = ES/ED) and prints the mean, min and max ratio as JSON.
+//!   Not the fit's first time point: the fit's initial alignment scales the template to the
+//!   subject's size and its spokes to the subject's wall thickness before the flow starts, so
+//!   the flow's own change is only part of the thickening.
 
+use medial::io::cmrep::read_template;
 use medial::io::vtk::{read_polydata, write_polydata, DataArray, PolyData, ValueType};
+use medial::model::SpokeMetrics;
 use medial::mesh::topology::signed_volume;
 use medial::{TriMesh, Vec3};
 use std::collections::HashMap;
@@ -27,7 +32,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     match args.iter().map(String::as_str).collect::<Vec<_>>()[..] {
         ["walls", data, out] => walls(Path::new(data), Path::new(out)),
         ["thickening", ed, es, out] => thickening(Path::new(ed), Path::new(es), Path::new(out)),
-        _ => Err("usage: lv walls DATA OUT | lv thickening ED.vtk ES.vtk OUT.vtk".into()),
+        _ => Err("usage: lv walls DATA OUT | lv thickening ED_TEMPLATE.vtk ES.vtk OUT.vtk".into()),
     }
 }
 
@@ -118,8 +123,10 @@ fn thickening(ed: &Path, es: &Path, out: &Path) -> Result<(), Box<dyn Error>> {
             .values
             .clone())
     };
-    let (ed_data, mut es_data) = (read_polydata(ed)?, read_polydata(es)?);
-    let (before, after) = (thickness(&ed_data, ed)?, thickness(&es_data, es)?);
+    let template = read_template(ed)?;
+    let before = SpokeMetrics::compute(&template, template.landmarks()).thickness;
+    let mut es_data = read_polydata(es)?;
+    let after = thickness(&es_data, es)?;
     if before.len() != after.len() {
         return Err("the two medial sheets have different atom counts".into());
     }

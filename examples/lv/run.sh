@@ -6,10 +6,10 @@ root="$(cd "$(dirname "$0")/../.." && pwd)"
 data="${LV_DATA:-$root/../shared/data/cap_lv}"
 out="$root/examples/lv/out"
 mkdir -p "$out"
-cargo build --release -q -p medial-cli
-cargo build --release -q --example lv
-medial="$root/target/release/medial"
-lv="$root/target/release/examples/lv"
+target="${CARGO_TARGET_DIR:-$root/target}"
+(cd "$root" && cargo build --release -q -p medial-cli && cargo build --release -q --example lv)
+medial="$target/release/medial"
+lv="$target/release/examples/lv"
 "$lv" walls "$data" "$out"                                   # ed_wall.vtk, es_wall.vtk
 "$medial" template "$out/ed_wall.vtk" --out "$out/ed_template.vtk" --sheet "$out/ed_sheet.vtk" \
   --work "$out/ed_template_fit" --quiet > "$out/ed_template_figures.json"
@@ -17,5 +17,5 @@ lv="$root/target/release/examples/lv"
 "$medial" fit --template "$out/ed_template.vtk" --image "$out/es_wall.nii.gz" --out "$out/es_fit" \
   --quiet > "$out/es_fit_figures.json"
 last="$(ls "$out"/es_fit/flow/medial_t*.vtk | sort | tail -1)"
-"$lv" thickening "$out/es_fit/flow/medial_t000.vtk" "$last" "$out/thickening.vtk" \
+"$lv" thickening "$out/ed_template.vtk" "$last" "$out/thickening.vtk" \
   | tee "$out/thickening.json"
