@@ -17,8 +17,8 @@
 
 use medial::io::cmrep::read_template;
 use medial::io::vtk::{read_polydata, write_polydata, DataArray, PolyData, ValueType};
-use medial::model::SpokeMetrics;
 use medial::mesh::topology::signed_volume;
+use medial::model::SpokeMetrics;
 use medial::{TriMesh, Vec3};
 use std::collections::HashMap;
 use std::error::Error;
