@@ -594,6 +594,7 @@ impl Fit<'_> {
                         cfg,
                         &self.options.out,
                         self.retries.len(),
+                        time_points::over_time(&points),
                     ),
                 )
             }
@@ -800,13 +801,15 @@ fn judge_flow(
 
 /// The error a fit that ended `status` returns once its results are written (none for a
 /// sound fit within its tolerances).
-/// `retried`: the runs of an automatic fit before this one that ended unsound.
+/// `retried`: the runs of an automatic fit before this one that ended unsound; `over_time`:
+/// the worst figures over the fitted flow's time points, which the constraints are judged on.
 fn failure(
     status: Status,
     last: &StageSummary,
     cfg: &StageConfig,
     out: &Path,
     retried: usize,
+    over_time: Option<time_points::OverTime>,
 ) -> Option<CliError> {
     let written = format!("results written to {} (status \"", out.display());
     match status {
@@ -824,16 +827,28 @@ fn failure(
                 ),
             }
         ))),
-        Status::ConstraintsNotMet => Some(CliError::ConstraintsNotMet(format!(
-            "stage '{}': the medial constraints are not met (max spoke–normal {:.3}°, max \
-             mismatch {:.3} %; tolerance {}°, {} %): raise mu, mu_factor or al_iterations; \
-             {written}constraints_not_met\")",
-            last.name,
-            last.figures.max_spoke_normal_deg.unwrap_or(f64::NAN),
-            last.figures.max_spoke_mismatch_pct.unwrap_or(f64::NAN),
-            cfg.tolerance_deg,
-            cfg.tolerance_pct,
-        ))),
+        Status::ConstraintsNotMet => {
+            // The worst over the flow's time points and its end: the figures judged.
+            let worst = |end: Option<f64>, flow: Option<f64>| {
+                [end, flow].into_iter().flatten().fold(f64::NAN, f64::max)
+            };
+            Some(CliError::ConstraintsNotMet(format!(
+                "stage '{}': the medial constraints are not met (max spoke–normal {:.3}°, max \
+                 mismatch {:.3} % over the fitted flow; tolerance {}°, {} %): raise mu, \
+                 mu_factor or al_iterations; {written}constraints_not_met\")",
+                last.name,
+                worst(
+                    last.figures.max_spoke_normal_deg,
+                    over_time.as_ref().map(|o| o.max_spoke_normal_deg)
+                ),
+                worst(
+                    last.figures.max_spoke_mismatch_pct,
+                    over_time.as_ref().map(|o| o.max_spoke_mismatch_pct)
+                ),
+                cfg.tolerance_deg,
+                cfg.tolerance_pct,
+            )))
+        }
         Status::Converged | Status::Budget | Status::Interrupted => None,
     }
 }

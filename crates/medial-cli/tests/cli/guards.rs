@@ -130,7 +130,24 @@ fn constraints_above_tolerance_exit_4_and_the_multipliers_reproduce_a_fit() {
         err.contains("constraints are not met") && err.contains("tolerance"),
         "{err}"
     );
+    // The message shows the figures judged (the worst over the flow's time points): at least
+    // one of them above its tolerance, never a verdict its own figures contradict.
+    let number_after = |key: &str| -> f64 {
+        let rest = &err[err.find(key).unwrap_or_else(|| panic!("{key} in {err}")) + key.len()..];
+        let end = rest
+            .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .unwrap();
+        rest[..end].parse().unwrap()
+    };
+    let (deg, pct) = (
+        number_after("max spoke–normal "),
+        number_after("max mismatch "),
+    );
     let summary = read_summary(&out);
+    let over_time = &summary["over_time"];
+    assert!(deg >= over_time["max_spoke_normal_deg"].as_f64().unwrap() - 1e-3);
+    assert!(pct >= over_time["max_spoke_mismatch_pct"].as_f64().unwrap() - 1e-3);
+    assert!(deg > 1.0 || pct > 1.0, "{err}");
     assert_eq!(summary["status"], "constraints_not_met");
     assert_eq!(summary["stages"][1]["constraints_met"], false);
     // The shipped schedule meets them; eval with its λ and μ gives its final objective.
