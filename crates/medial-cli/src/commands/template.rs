@@ -151,12 +151,19 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
     }
     let lowered = &built.figures.radius_lowered;
     if !lowered.atoms.is_empty() {
+        let when = match lowered.refits {
+            0 => "at inflation, where the inflated boundary would have intersected itself".into(),
+            n => format!(
+                "where the boundary intersected itself, at inflation or after the fit; the \
+                 template was fitted {n} more time{}",
+                if n == 1 { "" } else { "s" }
+            ),
+        };
         tracing::warn!(
             "the radius was lowered at {} atoms (to {:.0} % at least; `radius_lowered` lists them) \
-             where the boundary intersected itself; the template was fitted {} more times",
+             {when}",
             lowered.atoms.len(),
             100.0 * lowered.least_factor,
-            lowered.refits
         );
     }
     if let Some(wanted) = built.figures.voxel_wanted_mm {
