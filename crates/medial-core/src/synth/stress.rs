@@ -118,13 +118,17 @@ impl Thickening {
             let mesh = TriMesh::new(points, template.boundary_triangles().to_vec())?;
             let crossing = self_intersections(&mesh);
             let Some(&(f, g)) = crossing.first() else {
-                let limited = (0..factors.len())
+                let limited: Vec<usize> = (0..factors.len())
                     .filter(|&a| factors[a] != asked[a])
                     .collect();
+                let least_share = (limited.iter())
+                    .map(|&a| (factors[a] - 1.0) / (asked[a] - 1.0))
+                    .fold(1.0, f64::min);
                 return Ok(Thickened {
                     mesh,
                     factors,
                     limited,
+                    least_share,
                 });
             };
             if round == LIMIT_ROUNDS {
@@ -165,17 +169,9 @@ pub struct Thickened {
     pub factors: Vec<f64>,
     /// The atoms whose factor was limited, ascending.
     pub limited: Vec<usize>,
-}
-
-impl Thickened {
-    /// The smallest share of the change asked that a limited atom kept (1 when none was
-    /// limited): `(f − 1)/(f_asked − 1)`.
-    pub fn least_share(&self, thickening: &Thickening, template: &MedialTemplate) -> f64 {
-        let asked = thickening.atom_factors(template);
-        (self.limited.iter())
-            .map(|&a| (self.factors[a] - 1.0) / (asked[a] - 1.0))
-            .fold(1.0, f64::min)
-    }
+    /// The smallest share of the change asked that a limited atom kept, `(f − 1)/(f_asked − 1)`
+    /// (1 when none was limited).
+    pub least_share: f64,
 }
 
 /// What [`degrade`] does to a segmentation.
@@ -378,7 +374,7 @@ mod tests {
                 assert_eq!(f, 1.7);
             }
         }
-        let least = thickened.least_share(&thick, t);
+        let least = thickened.least_share;
         assert!(least > 0.0 && least <= 0.5 + 1e-12, "{least}");
     }
 

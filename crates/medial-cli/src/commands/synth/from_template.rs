@@ -205,7 +205,7 @@ impl StressFigures {
         if thickening.is_none() && degraded.is_none() {
             return None;
         }
-        let (thickening, thickened) = (thickening.map(|t| t.0), thickening.map(|t| t.1));
+        let (thickened, thickening) = (thickening.map(|t| t.1), thickening.map(|t| t.0));
         let region = thickening.and_then(|t| t.region());
         Some(Self {
             thicken: thickening.map_or(1.0, |t| t.global()),
@@ -220,8 +220,7 @@ impl StressFigures {
                     .count()
             }),
             thicken_limited_atoms: thickened.map_or(0, |t| t.limited.len()),
-            thicken_least_share: (thickening.zip(thickened))
-                .map_or(1.0, |(asked, t)| t.least_share(asked, template)),
+            thicken_least_share: thickened.map_or(1.0, |t| t.least_share),
             boundary_voxels: degraded.as_ref().map_or(0, |d| d.boundary_voxels),
             flipped_voxels: degraded.as_ref().map_or(0, |d| d.flipped),
             hole_voxels: degraded.as_ref().map_or(0, |d| d.cleared),
@@ -271,11 +270,9 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
         ),
         None => None,
     };
-    let walled = thickened
-        .as_ref()
-        .map_or(boundary.clone(), |t| t.mesh.clone());
-    let target = target_boundary(&walled, &warp).map_err(in_template)?;
-    let surface = target_surface(&walled, &warp).map_err(in_template)?;
+    let walled = thickened.as_ref().map_or(&boundary, |t| &t.mesh);
+    let target = target_boundary(walled, &warp).map_err(in_template)?;
+    let surface = target_surface(walled, &warp).map_err(in_template)?;
     let image = target_image(&surface, args.spacing, args.margin)?;
     let (image, degradation) = degraded(args, image)?;
     let geometry = Geometry::of(&template, &boundary, &axes);
@@ -300,13 +297,13 @@ pub fn run(args: &SynthArgs, template_path: &Path) -> Result<(), CliError> {
     .write(args.out)?;
     if let Some(t) = &thickened {
         write_factors(&args.out.join("thickening.csv"), &t.factors)?;
-        if let Some(asked) = thickening.as_ref().filter(|_| !t.limited.is_empty()) {
+        if !t.limited.is_empty() {
             tracing::warn!(
                 "the thickening was limited at {} atoms (to {:.0} % of the change asked at \
                  least), where the wall as asked crossed itself; thickening.csv has the factors \
                  applied",
                 t.limited.len(),
-                100.0 * t.least_share(asked, &template)
+                100.0 * t.least_share
             );
         }
     }

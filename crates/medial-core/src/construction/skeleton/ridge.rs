@@ -161,14 +161,7 @@ fn join_at_their_scale(points: &[MedialPoint], cell_of: &[usize], uf: &mut Union
     }
     // Only points off the largest piece can join anything: the search runs from them.
     let root: Vec<usize> = cell_of.iter().map(|&c| uf.find(c)).collect();
-    let mut size: HashMap<usize, f64> = HashMap::new();
-    for (p, &r) in points.iter().zip(&root) {
-        *size.entry(r).or_default() += p.radius;
-    }
-    let Some(largest) = (size.iter())
-        .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(a.0)))
-        .map(|(&r, _)| r)
-    else {
+    let Some((largest, _)) = largest_of(points, &root) else {
         return;
     };
     let off: Vec<usize> = (0..points.len()).filter(|&i| root[i] != largest).collect();
@@ -203,6 +196,19 @@ fn join_at_their_scale(points: &[MedialPoint], cell_of: &[usize], uf: &mut Union
     }
 }
 
+/// The piece (root) of the largest total radius `Σ r` over `points` whose pieces are `root`
+/// (ties to the smallest root), with every piece's `Σ r`; none without points.
+fn largest_of(points: &[MedialPoint], root: &[usize]) -> Option<(usize, HashMap<usize, f64>)> {
+    let mut size: HashMap<usize, f64> = HashMap::new();
+    for (p, &r) in points.iter().zip(root) {
+        *size.entry(r).or_default() += p.radius;
+    }
+    let best = (size.iter())
+        .max_by(|a, b| a.1.total_cmp(b.1).then(b.0.cmp(a.0)))
+        .map(|(&r, _)| r)?;
+    Some((best, size))
+}
+
 /// The points of the largest piece by total radius `Σ r` (so that thin spurs weigh little), two
 /// points being joined when their cells of size `cell` touch (26-neighbourhood) or when they
 /// are closer than the smaller of their radii ([`join_at_their_scale`]); ties to the
@@ -229,15 +235,7 @@ fn largest_piece(points: Vec<MedialPoint>, cell: f64) -> (Vec<MedialPoint>, f64)
     }
     join_at_their_scale(&points, &cell_of, &mut uf);
     let root: Vec<usize> = cell_of.iter().map(|&c| uf.find(c)).collect();
-    let mut size: HashMap<usize, f64> = HashMap::new();
-    for (p, &r) in points.iter().zip(&root) {
-        *size.entry(r).or_default() += p.radius;
-    }
-    let Some(best) = root
-        .iter()
-        .copied()
-        .max_by(|a, b| size[a].total_cmp(&size[b]).then(b.cmp(a)))
-    else {
+    let Some((best, size)) = largest_of(&points, &root) else {
         return (points, 0.0);
     };
     let whole: f64 = points.iter().map(|p| p.radius).sum();
