@@ -91,6 +91,8 @@ pub struct Start {
     pub given: Model,
     /// What the initial alignment did, one line per step (in summary.json as `alignment`).
     pub notes: Vec<String>,
+    /// The trials that chose the start (in summary.json as `start_trials`).
+    pub trials: Vec<medial_core::fit::trial::StartTrial>,
 }
 
 /// The config of a fit: `config` with the flags of `inputs` in place of its template and
@@ -171,6 +173,7 @@ fn automatic(inputs: &Inputs, out: &Path) -> Result<Resolved, CliError> {
             alignment: start.alignment,
             given: model,
             notes: start.notes,
+            trials: start.trials,
         }),
     })
 }
@@ -292,6 +295,7 @@ pub fn run(resolved: &Resolved, options: &FitOptions) -> Result<Summary, CliErro
             prepared: engine.stages(),
             planned: &planned,
             alignment: resolved.start.as_ref().map_or(&[], |s| &s.notes),
+            start_trials: resolved.start.as_ref().map_or(&[], |s| &s.trials),
             retries: &retries,
         };
         let (resumed, fingerprint) = if options.resume {
@@ -348,6 +352,8 @@ struct Fit<'a> {
     planned: &'a [PlannedStage<'a>],
     /// An automatic fit's alignment notes ([`Start::notes`]).
     alignment: &'a [String],
+    /// An automatic fit's start trials ([`Start::trials`]).
+    start_trials: &'a [medial_core::fit::trial::StartTrial],
     /// The runs of an automatic fit that ended unsound before this one, and why it ran again.
     retries: &'a [String],
 }
@@ -672,6 +678,7 @@ impl Fit<'_> {
             step_strains,
             stages,
             alignment: self.alignment.to_vec(),
+            start_trials: self.start_trials.to_vec(),
             retries: self.retries.to_vec(),
             files: Vec::new(),
             sha256: Default::default(),

@@ -172,6 +172,11 @@ pub struct Summary {
     /// anisotropy, overlap before and after, the projection's moves, a fallback and its reason).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub alignment: Vec<String>,
+    /// An automatic fit that had more than one candidate start: what a short trial of the fit
+    /// reached from each, and which was taken (`medial_core::fit::trial`); empty when there was
+    /// one.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub start_trials: Vec<medial_core::fit::trial::StartTrial>,
     /// An automatic fit that ended unsound and ran again with safer settings: one line per
     /// run before this one (why it ended, what changed); empty when it ran once.
     pub retries: Vec<String>,

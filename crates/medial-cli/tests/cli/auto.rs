@@ -43,6 +43,23 @@ fn an_automatic_fit_to_a_segmentation_is_medial_and_its_config_reruns_to_the_sam
         let listed = summary["files"].as_array().unwrap();
         assert!(listed.iter().any(|f| f == file), "{file} not in the set");
     }
+    // The alignment moved the template: where it was given is a candidate start too, and the
+    // trial of the fit's first window from each chose (the one that ends lowest, not one that
+    // folds), as summary.json records.
+    let trials = summary["start_trials"].as_array().unwrap();
+    assert!(trials.len() >= 2, "{trials:?}");
+    assert!(
+        trials.iter().any(|t| t["start"] == "as given"),
+        "{trials:?}"
+    );
+    let taken: Vec<&Value> = trials.iter().filter(|t| t["taken"] == true).collect();
+    assert_eq!(taken.len(), 1, "{trials:?}");
+    let lowest = trials
+        .iter()
+        .filter_map(|t| t["objective"].as_f64())
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(f(&taken[0]["objective"]), lowest, "{trials:?}");
+    assert!(err.contains("start chosen by a trial"), "{err}");
     let last = &summary["final"];
     println!("automatic toy fit: {summary:#}");
     // The toy's AL iterations settle before the last of the five (the constraints within

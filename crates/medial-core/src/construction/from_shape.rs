@@ -695,6 +695,30 @@ fn figures_of(
 mod tests {
     use super::*;
 
+    /// The automatic start of the fit to the shape chooses among candidates by a trial of the
+    /// plan's first window ([`crate::fit::trial`]); the fit then runs [`self_fit_schedule`]. The
+    /// two must agree on that window (μ, time steps, iterations), or the trial would judge a
+    /// fit that is not run.
+    #[test]
+    fn the_trial_of_the_start_is_the_first_window_of_the_fit_to_the_shape() {
+        use crate::fit::trial::trial_spec;
+        let template = crate::testing::meshes::bipyramid(0.5);
+        let boundary = template.boundary_mesh().unwrap();
+        let (dims, grid) = grid_around(&boundary, 0.1, 0.4).unwrap();
+        let target = Target::Image {
+            volume: rasterize(&boundary, dims, grid).unwrap(),
+            label: None,
+        };
+        let plan =
+            crate::fit::plan::automatic(&Model::Medial(Box::new(template)), &target).unwrap();
+        let mut adjusted = plan.clone();
+        for stage in &mut adjusted.stages {
+            self_fit_schedule(stage);
+        }
+        assert_ne!(adjusted, plan);
+        assert_eq!(trial_spec(&adjusted).unwrap(), trial_spec(&plan).unwrap());
+    }
+
     /// A strip of four triangles along x, its far half turned about the y axis by `turn`
     /// degrees (a crease along x = 1), with either orientation of one of its triangles.
     fn creased(turn: f64) -> MedialSheet {

@@ -3,7 +3,8 @@
 //! augmented-Lagrangian schedule of a stage ([`augmented_lagrangian`]), and a whole fit of
 //! several stages in a row ([`stages`]), which can pause after any accepted iterate and resume
 //! from a serialisable [`Checkpoint`] to the same bits; and the initial alignment, a similarity
-//! then an affine map ([`align`]).
+//! then an affine map ([`align`]), with the candidate starts of an automatic fit judged by a
+//! short trial of the flow ([`trial`]).
 
 pub mod align;
 pub mod augmented_lagrangian;
@@ -17,6 +18,7 @@ pub mod prepare;
 pub mod run;
 pub mod spec;
 pub mod stages;
+pub mod trial;
 
 pub use align::{
     affine_between, align_affine, align_similarity, anisotropy, explained_spread,

@@ -25,6 +25,7 @@ use crate::fit::plan::{self, Geometry};
 use crate::fit::prepare::{PreparedStage, Target};
 use crate::fit::spec::FitSpec;
 use crate::fit::stages::{run_stages, FitEvent, PlannedStage};
+use crate::fit::trial::{choose, describe, Candidate, StartTrial};
 use crate::flow::Flow;
 use crate::image::rasterize::voxel_dice;
 use crate::memory::MemoryLimit;
@@ -143,48 +144,88 @@ impl Fit {
     }
 }
 
-/// The start of a fit of the aligned template `aligned` to the foreground `mask` that is
+/// The thickened start of a fit of the aligned template `aligned` to a foreground that is
 /// `ratio` times as thick (by volume, after the similarity): where the ratio passes
 /// [`THICKEN_AT_LEAST`] (or its inverse), the template with its spokes scaled by the ratio
-/// ([`thickened`]) when that overlaps the foreground better; the wall's thickness is then its
-/// own factor of the alignment rather than a long way for the flow to go along the normals,
-/// where thin prisms fold.
+/// ([`thickened`]), or by less of it (ratio^{3/4}, ^{1/2}, ^{1/4}) where the whole is too thick
+/// for the sheet's curvature, with its factor. The wall's thickness is then its own factor of
+/// the alignment rather than a long way for the flow to go along the normals, where thin prisms
+/// fold; whether the fit starts from it is for the trial to say ([`choose`]).
 fn thicker_start(
-    aligned: MedialTemplate,
+    aligned: &MedialTemplate,
     ratio: f64,
-    mask: &crate::image::Volume,
     notes: &mut Vec<String>,
-) -> Result<MedialTemplate> {
+) -> Option<(f64, MedialTemplate)> {
     if !(ratio.is_finite() && (ratio >= THICKEN_AT_LEAST || ratio <= 1.0 / THICKEN_AT_LEAST)) {
-        return Ok(aligned);
+        return None;
     }
-    // The whole ratio first, then less of it (ratio^{3/4}, ^{1/2}, ^{1/4}) where the whole one
-    // is too thick for the sheet's curvature.
-    let Some((factor, thick)) = [1.0, 0.75, 0.5, 0.25]
+    let found = [1.0, 0.75, 0.5, 0.25]
         .iter()
         .map(|power| ratio.powf(*power))
-        .find_map(|factor| thickened(&aligned, factor).map(|t| (factor, t)))
-    else {
+        .find_map(|factor| thickened(aligned, factor).map(|t| (factor, t)));
+    if found.is_none() {
         notes.push(format!(
             "the wall {ratio:.2}× as thick as the template: no thickened template (up to that \
              factor) is sound; the flow thickens it"
         ));
-        return Ok(aligned);
-    };
-    let before = voxel_dice(&aligned.boundary_mesh()?, mask)?;
-    let after = voxel_dice(&thick.boundary_mesh()?, mask)?;
-    if after <= before {
-        notes.push(format!(
-            "the wall {ratio:.2}× as thick as the template: the template thickened {factor:.2}× \
-             overlaps less (voxel Dice {before:.3} → {after:.3}); the flow thickens it"
-        ));
-        return Ok(aligned);
     }
-    notes.push(format!(
-        "the wall {ratio:.2}× as thick as the template: spokes scaled by {factor:.2} and \
-         projected, voxel Dice {before:.3} → {after:.3}"
-    ));
-    Ok(thick)
+    found
+}
+
+/// The least share of the best candidate's starting overlap (voxel Dice) at which a start is
+/// tried at all ([`choose`]): a start must otherwise more than double its overlap in the
+/// trial's window to be worth the trial, which no first window measured does (decision 0037).
+pub const TRIAL_OVERLAP_SHARE: f64 = 0.5;
+
+/// The candidate starts of a fit of `template` to the foreground `mask` (see
+/// [`crate::fit::trial`]): `aligned` (the template carried by `matrix`); the same thickened
+/// to the foreground's wall ([`thicker_start`], `ratio` as thick); and the template where it
+/// was given, projected onto its constraints where it is not medial, when the alignment moved
+/// it. A start whose voxel Dice is under [`TRIAL_OVERLAP_SHARE`] of the best start's is not a
+/// candidate (noted).
+fn image_candidates(
+    template: &MedialTemplate,
+    aligned: MedialTemplate,
+    matrix: Matrix4<f64>,
+    ratio: f64,
+    mask: &crate::image::Volume,
+    notes: &mut Vec<String>,
+) -> Result<Vec<Candidate>> {
+    let mut starts = Vec::new();
+    if let Some((factor, thick)) = thicker_start(&aligned, ratio, notes) {
+        starts.push((format!("thickened {factor:.2}×"), thick, matrix));
+    }
+    starts.insert(0, ("aligned".to_string(), aligned, matrix));
+    if matrix != Matrix4::identity() {
+        let unmoved = InitialAlignment {
+            matrix: Matrix4::identity(),
+            similarity: Matrix4::identity(),
+            notes: Vec::new(),
+            thickness_ratio: None,
+        };
+        starts.push((
+            "as given".to_string(),
+            align_template(template, &unmoved)?.template,
+            Matrix4::identity(),
+        ));
+    }
+    let overlaps = starts
+        .iter()
+        .map(|(_, t, _)| voxel_dice(&t.boundary_mesh()?, mask))
+        .collect::<Result<Vec<_>>>()?;
+    let best = overlaps.iter().copied().fold(0.0, f64::max);
+    let mut candidates = Vec::new();
+    for ((name, start, matrix), dice) in starts.into_iter().zip(overlaps) {
+        if dice >= TRIAL_OVERLAP_SHARE * best {
+            candidates.push(Candidate::new(name, Model::Medial(Box::new(start)), matrix));
+        } else {
+            notes.push(format!(
+                "start {name} not tried: voxel Dice {dice:.3}, under {TRIAL_OVERLAP_SHARE} of \
+                 the best start's {best:.3}"
+            ));
+        }
+    }
+    Ok(candidates)
 }
 
 /// Where an automatic fit starts: its plan, and the template carried by the initial alignment.
@@ -198,6 +239,9 @@ pub struct AutomaticStart {
     pub alignment: Matrix4<f64>,
     /// What the alignment did, one line per step.
     pub notes: Vec<String>,
+    /// The trials that chose the start among several candidates ([`choose`]); empty when
+    /// there was one.
+    pub trials: Vec<StartTrial>,
 }
 
 impl AutomaticStart {
@@ -214,28 +258,45 @@ impl AutomaticStart {
 /// template's own geometry, not of the alignment's guess at the target's thickness; decision
 /// 0032) and the initial alignment
 /// ([`initial_alignment`]; a medial template carried by [`align_template`], a plain mesh by the
-/// whole map), its grids within `memory`. Voxels for rasterizing a closed surface to align to: half the mean spoke
+/// whole map), its grids within `memory`. Against an image, a medial template's start is chosen
+/// among the candidates ([`image_candidates`]) by a short trial of the fit from each
+/// ([`choose`]). Voxels for rasterizing a closed surface to align to: half the mean spoke
 /// ([`Geometry::alignment_spacing`]), or a 128th of a plain mesh's long extent.
 pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<AutomaticStart> {
     let spec = plan::automatic(model, target)?;
+    let mut trials = Vec::new();
     let (alignment, start): (InitialAlignment, Model) = match model {
         Model::Medial(template) => {
             let boundary = template.boundary_mesh()?;
             let axes = PrincipalAxes::of(boundary.points())?;
             let spacing = Geometry::of(template, &boundary, &axes).alignment_spacing();
-            let alignment = initial_alignment(&boundary, target, spacing, memory)?;
+            let mut alignment = initial_alignment(&boundary, target, spacing, memory)?;
             let aligned = align_template(template, &alignment)?;
-            let mut alignment = alignment;
             alignment.notes.extend(aligned.notes);
             alignment.matrix = aligned.matrix;
-            let start = match (target, alignment.thickness_ratio) {
+            let candidates = match (target, alignment.thickness_ratio) {
                 (Target::Image { volume, label }, Some(ratio)) => {
                     let mask = volume.foreground(*label);
-                    thicker_start(aligned.template, ratio, &mask, &mut alignment.notes)?
+                    image_candidates(
+                        template,
+                        aligned.template,
+                        alignment.matrix,
+                        ratio,
+                        &mask,
+                        &mut alignment.notes,
+                    )?
                 }
-                _ => aligned.template,
+                _ => vec![Candidate::new(
+                    "aligned",
+                    Model::Medial(Box::new(aligned.template)),
+                    alignment.matrix,
+                )],
             };
-            (alignment, Model::Medial(Box::new(start)))
+            let (taken, tried) = choose(candidates, &spec, target, memory)?;
+            alignment.notes.extend(describe(&tried));
+            trials = tried;
+            alignment.matrix = taken.alignment;
+            (alignment, taken.model)
         }
         Model::Plain(mesh) => {
             let axes = PrincipalAxes::of(mesh.points())?;
@@ -249,5 +310,6 @@ pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<
         model: start,
         alignment: alignment.matrix,
         notes: alignment.notes,
+        trials,
     })
 }
