@@ -27,6 +27,7 @@
 //! assert_eq!(aligned.template.landmark_count(), case.template().landmark_count());
 //! ```
 
+use crate::construction::inflate::self_intersections;
 use crate::construction::project::{project, ConstraintFigures, ProjectOptions};
 use crate::fit::align::{
     affine_between, align_affine, align_similarity, anisotropy, explained_spread,
@@ -40,6 +41,9 @@ use crate::mesh::carry_points;
 use crate::mesh::topology::{check_closed_oriented_manifold, check_outward};
 use crate::model::constraints::MedialConstraints;
 use crate::model::template::MedialTemplate;
+use crate::synth::halve_at_crossings;
+#[cfg(doc)]
+use crate::synth::LIMIT_ROUNDS;
 use crate::{Error, Result, TriMesh, Vec3};
 use nalgebra::Matrix4;
 
@@ -331,29 +335,53 @@ pub fn align_template(
 pub const THICKEN_AT_LEAST: f64 = 1.15;
 
 /// `template` with every spoke scaled by `factor` about its medial point, projected back onto
-/// the constraints: the wall made `factor` times as thick at the same medial sheet. None where
-/// the thickened boundary intersects itself or its projection fails (too thick for the sheet's
-/// curvature).
-pub fn thickened(template: &MedialTemplate, factor: f64) -> Option<MedialTemplate> {
+/// the constraints: the wall made up to `factor` times as thick at the same medial sheet. Where
+/// the sheet cannot hold the whole factor (a curved sheet's offset folds at its focal distance,
+/// two sheets at a narrow seam meet sooner), the thickened or projected boundary crosses
+/// itself: with `limit_rounds > 0` the change is then halved at the atoms of the crossing
+/// triangles and the template thickened and projected again, up to `limit_rounds` times (the
+/// limit of a synthetic thickening, [`crate::synth::Thickening::boundary`], whose
+/// [`LIMIT_ROUNDS`] a caller may pass), so that a wall is thickened where it can be; with 0 the
+/// factor is uniform or nothing. With the number of atoms limited. None where it still crosses
+/// itself, or the projection fails or is not a closed, outward surface.
+pub fn thickened(
+    template: &MedialTemplate,
+    factor: f64,
+    limit_rounds: u32,
+) -> Option<(MedialTemplate, usize)> {
     let q = template.landmarks();
-    let atoms = template.medial_index();
-    let moved: Vec<Vec3> = (0..q.len())
-        .map(|i| {
-            if i < template.boundary_count() {
-                let m = q[template.atom_landmark(atoms[i])];
-                m + factor * (q[i] - m)
-            } else {
-                q[i]
+    let atom_of = template.medial_index();
+    let mut factors = vec![factor; template.medial_count()];
+    for _ in 0..=limit_rounds {
+        let moved: Vec<Vec3> = (0..q.len())
+            .map(|i| {
+                if i < template.boundary_count() {
+                    let m = q[template.atom_landmark(atom_of[i])];
+                    m + factors[atom_of[i]] * (q[i] - m)
+                } else {
+                    q[i]
+                }
+            })
+            .collect();
+        let carried = template.with_landmarks(&moved).ok()?;
+        let crossing = self_intersections(&carried.boundary_mesh().ok()?);
+        let (mesh, crossing) = if crossing.is_empty() {
+            let projected = project(&carried, &ProjectOptions::default()).ok()?.template;
+            let boundary = projected.boundary_mesh().ok()?;
+            let crossing = self_intersections(&boundary);
+            if crossing.is_empty() {
+                let sound = check_closed_oriented_manifold(&boundary).is_ok()
+                    && check_outward(&boundary).is_ok();
+                let limited = factors.iter().filter(|&&f| f != factor).count();
+                return sound.then_some((projected, limited));
             }
-        })
-        .collect();
-    let carried = template.with_landmarks(&moved).ok()?;
-    let projected = project(&carried, &ProjectOptions::default()).ok()?.template;
-    let boundary = projected.boundary_mesh().ok()?;
-    let sound = crate::construction::inflate::self_intersections(&boundary).is_empty()
-        && check_closed_oriented_manifold(&boundary).is_ok()
-        && check_outward(&boundary).is_ok();
-    sound.then_some(projected)
+            (boundary, crossing)
+        } else {
+            (carried.boundary_mesh().ok()?, crossing)
+        };
+        halve_at_crossings(&mut factors, &mesh, &crossing, atom_of);
+    }
+    None
 }
 
 /// Mean spoke length `|q_b − q_M[b]|` over the boundary points of `template`, mm.
@@ -371,6 +399,27 @@ fn mean_spoke(template: &MedialTemplate) -> f64 {
 mod tests {
     use super::*;
     use nalgebra::Matrix4;
+
+    /// Past the focal distance of the toy's sheets at its seam (about ×1.4) its wall thickened
+    /// uniformly crosses itself: no uniform start, but one limited at a minority of its atoms,
+    /// sound after the projection; a factor the sheet holds is uniform, nothing limited.
+    #[test]
+    fn a_thickened_start_is_uniform_where_the_sheet_holds_it_and_limited_where_not() {
+        use crate::model::TemplateSummary;
+        use crate::synth::{Shape, SyntheticCase, LIMIT_ROUNDS};
+        let case = SyntheticCase::build(Shape::Toy).unwrap();
+        let t = case.template();
+        assert!(thickened(t, 1.7, 0).is_none());
+        let (thick, limited) = thickened(t, 1.7, LIMIT_ROUNDS).unwrap();
+        assert!(limited > 0 && limited < t.medial_count() / 2, "{limited}");
+        let boundary = thick.boundary_mesh().unwrap();
+        assert!(crate::construction::inflate::self_intersections(&boundary).is_empty());
+        assert!(TemplateSummary::of(&thick).volume_mm3 > 1.3 * TemplateSummary::of(t).volume_mm3);
+        let (uniform, none) = thickened(t, 1.2, 0).unwrap();
+        assert_eq!(none, 0);
+        let ratio = TemplateSummary::of(&uniform).volume_mm3 / TemplateSummary::of(t).volume_mm3;
+        assert!((ratio - 1.2).abs() < 0.05, "{ratio}");
+    }
 
     /// The alignment's estimate adds the image beside the template's grid: a limit that holds
     /// the grid alone but not both refuses before anything is allocated, naming both parts.

@@ -32,6 +32,7 @@ use crate::memory::MemoryLimit;
 use crate::mesh::PrincipalAxes;
 use crate::model::MedialTemplate;
 use crate::model::Model;
+use crate::synth::LIMIT_ROUNDS;
 use crate::Result;
 use nalgebra::Matrix4;
 
@@ -145,28 +146,40 @@ impl Fit {
 }
 
 /// The thickened start of a fit of the aligned template `aligned` to a foreground that is
-/// `ratio` times as thick (by volume, after the similarity): where the ratio passes
-/// [`THICKEN_AT_LEAST`] (or its inverse), the template with its spokes scaled by the ratio
-/// ([`thickened`]), or by less of it (ratio^{3/4}, ^{1/2}, ^{1/4}) where the whole is too thick
-/// for the sheet's curvature, with its factor. The wall's thickness is then its own factor of
-/// the alignment rather than a long way for the flow to go along the normals, where thin prisms
-/// fold; whether the fit starts from it is for the trial to say ([`choose`]).
+/// `ratio` times as thick (by volume, after the similarity), named with its factor: where the
+/// ratio passes [`THICKEN_AT_LEAST`] (or its inverse), the template with its spokes scaled by
+/// the ratio, or by less of it (ratio^{3/4}, ^{1/2}, ^{1/4}), the first that is sound
+/// ([`thickened`]). The wall's thickness is then its own factor of the alignment rather than a
+/// long way for the flow to go along the normals, where thin prisms fold; whether the fit
+/// starts from it is for the trial to say ([`choose`]).
+///
+/// A uniform factor first: it changes the template's thickness and not its pattern (decision
+/// 0037's addendum). Only where no uniform factor is sound (a narrow seam, a curved thin wall),
+/// the factors again limited at the atoms where the sheet cannot hold them
+/// ([`LIMIT_ROUNDS`]), so that the wall is thickened where it can be.
 fn thicker_start(
     aligned: &MedialTemplate,
     ratio: f64,
     notes: &mut Vec<String>,
-) -> Option<(f64, MedialTemplate)> {
+) -> Option<(String, MedialTemplate)> {
     if !(ratio.is_finite() && (ratio >= THICKEN_AT_LEAST || ratio <= 1.0 / THICKEN_AT_LEAST)) {
         return None;
     }
-    let found = [1.0, 0.75, 0.5, 0.25]
-        .iter()
-        .map(|power| ratio.powf(*power))
-        .find_map(|factor| thickened(aligned, factor).map(|t| (factor, t)));
+    let found = [0, LIMIT_ROUNDS].iter().find_map(|&rounds| {
+        [1.0, 0.75, 0.5, 0.25]
+            .iter()
+            .map(|power| ratio.powf(*power))
+            .find_map(|factor| {
+                thickened(aligned, factor, rounds).map(|(t, limited)| match limited {
+                    0 => (format!("thickened {factor:.2}×"), t),
+                    n => (format!("thickened {factor:.2}× (limited at {n} atoms)"), t),
+                })
+            })
+    });
     if found.is_none() {
         notes.push(format!(
             "the wall {ratio:.2}× as thick as the template: no thickened template (up to that \
-             factor) is sound; the flow thickens it"
+             factor, limited where the sheet cannot hold it) is sound; the flow thickens it"
         ));
     }
     found
@@ -192,8 +205,8 @@ fn image_candidates(
     notes: &mut Vec<String>,
 ) -> Result<Vec<Candidate>> {
     let mut starts = Vec::new();
-    if let Some((factor, thick)) = thicker_start(&aligned, ratio, notes) {
-        starts.push((format!("thickened {factor:.2}×"), thick, matrix));
+    if let Some((name, thick)) = thicker_start(&aligned, ratio, notes) {
+        starts.push((name, thick, matrix));
     }
     starts.insert(0, ("aligned".to_string(), aligned, matrix));
     if matrix != Matrix4::identity() {
@@ -258,10 +271,11 @@ impl AutomaticStart {
 /// template's own geometry, not of the alignment's guess at the target's thickness; decision
 /// 0032) and the initial alignment
 /// ([`initial_alignment`]; a medial template carried by [`align_template`], a plain mesh by the
-/// whole map), its grids within `memory`. Against an image, a medial template's start is chosen
-/// among the candidates ([`image_candidates`]) by a short trial of the fit from each
-/// ([`choose`]). Voxels for rasterizing a closed surface to align to: half the mean spoke
-/// ([`Geometry::alignment_spacing`]), or a 128th of a plain mesh's long extent.
+/// whole map), its grids within `memory`. Against an image, a medial template's start is
+/// chosen among the candidates (the aligned, the thickened, the given template) by a short
+/// trial of the fit from each ([`choose`]). Voxels for rasterizing a closed surface to align
+/// to: half the mean spoke ([`Geometry::alignment_spacing`]), or a 128th of a plain mesh's long
+/// extent.
 pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<AutomaticStart> {
     let spec = plan::automatic(model, target)?;
     let mut trials = Vec::new();

@@ -248,13 +248,14 @@ pub fn describe(trials: &[StartTrial]) -> Option<String> {
         .collect();
     Some(format!(
         "start chosen by a trial of the fit's first {} L-BFGS iterations from each candidate \
-         ({} evaluations in all): {}",
+         ({} evaluations, {:.1} s in all): {}",
         trials
             .iter()
             .map(|t| t.iterations)
             .max()
             .unwrap_or(first.iterations),
         trials.iter().map(|t| t.evaluations).sum::<usize>(),
+        trials.iter().map(|t| t.seconds).sum::<f64>(),
         each.join("; ")
     ))
 }

@@ -44,6 +44,7 @@ pub use shape::{
 };
 pub use sheets::{parameter_grid, ParameterGrid};
 pub use stress::{
-    degrade, seeded_directions, Degradation, Degraded, Region, Thickened, Thickening, LIMIT_ROUNDS,
+    degrade, halve_at_crossings, seeded_directions, Degradation, Degraded, Region, Thickened,
+    Thickening, LIMIT_ROUNDS,
 };
 pub use warp::Warp;

@@ -141,18 +141,30 @@ impl Thickening {
                     1u64 << LIMIT_ROUNDS
                 )));
             }
-            let mut atoms: Vec<usize> = (crossing.iter())
-                .flat_map(|&(f, g)| [f, g])
-                .flat_map(|t| mesh.triangles()[t])
-                .map(|b| atom_of[b])
-                .collect();
-            atoms.sort_unstable();
-            atoms.dedup();
-            for a in atoms {
-                factors[a] = 1.0 + 0.5 * (factors[a] - 1.0);
-            }
+            halve_at_crossings(&mut factors, &mesh, &crossing, atom_of);
             round += 1;
         }
+    }
+}
+
+/// Halves the change `f − 1` of the atoms' `factors` at every atom of the triangles of `mesh`
+/// (a template's boundary, `atom_of` its medial index) in the `crossing` pairs
+/// ([`self_intersections`]): the limit of [`Thickening::boundary`], one round of it.
+pub fn halve_at_crossings(
+    factors: &mut [f64],
+    mesh: &TriMesh,
+    crossing: &[(usize, usize)],
+    atom_of: &[usize],
+) {
+    let mut atoms: Vec<usize> = (crossing.iter())
+        .flat_map(|&(f, g)| [f, g])
+        .flat_map(|t| mesh.triangles()[t])
+        .map(|b| atom_of[b])
+        .collect();
+    atoms.sort_unstable();
+    atoms.dedup();
+    for a in atoms {
+        factors[a] = 1.0 + 0.5 * (factors[a] - 1.0);
     }
 }
 
