@@ -436,6 +436,7 @@ impl StageConfig {
                     window: self.progress_window,
                     decrease: self.progress_decrease,
                 }),
+                ..LbfgsOptions::default()
             },
             tolerance: MedialTolerance {
                 angle_deg: self.tolerance_deg,

@@ -34,6 +34,10 @@ pub struct LbfgsOptions {
     /// Stop when the last iterations together decreased it too little (none: only the
     /// other rules).
     pub progress: Option<ProgressRule>,
+    /// Most restarts after an unsound iterate ([`MAX_RESTARTS`] by default); past them an
+    /// unsound iterate ends the minimisation (0: the first one does, as a trial that only
+    /// needs to know whether a start folds wants; [`crate::fit::trial`]).
+    pub max_restarts: usize,
 }
 
 /// The progress rule of [`LbfgsOptions`]: stop at iteration `k ≥ window` when
@@ -56,6 +60,7 @@ impl Default for LbfgsOptions {
             gradient_tolerance: 1e-6,
             relative_decrease: 1e-9,
             progress: None,
+            max_restarts: MAX_RESTARTS,
         }
     }
 }
@@ -259,7 +264,7 @@ struct Run {
 /// `s + 2⁻ʲ (u − s)`, `j = 1 … 20`, below the last sound iterate `s`, and L-BFGS restarts there with fresh memory; so does a line search whose
 /// trial point cannot be evaluated, from the last sound iterate. The minimisation ends with
 /// [`StopReason::Unsound`] at the last sound iterate when no shorter step is sound, when two
-/// restarts in a row make no progress, or after [`MAX_RESTARTS`]. A start that cannot be
+/// restarts in a row make no progress, or after [`LbfgsOptions::max_restarts`]. A start that cannot be
 /// evaluated is an error; an unsound start ends at once.
 ///
 /// After every accepted iterate at which no stopping rule holds, `pause` is asked whether to
@@ -311,7 +316,7 @@ pub fn minimize(
         match end {
             SegmentEnd::Restart(cause) => {
                 let progressed = run.sound.iteration != segment_start;
-                if (!progressed && run.stalled) || run.restarts == MAX_RESTARTS {
+                if (!progressed && run.stalled) || run.restarts >= options.max_restarts {
                     break StopReason::Unsound(cause);
                 }
                 run.stalled = !progressed;
@@ -411,7 +416,8 @@ enum SegmentEnd {
     Paused(Box<Segment>),
 }
 
-/// Most restarts of L-BFGS in one minimisation; past them an unsound iterate ends it.
+/// The default of [`LbfgsOptions::max_restarts`]: most restarts of L-BFGS in one minimisation;
+/// past them an unsound iterate ends it.
 pub const MAX_RESTARTS: usize = 100;
 
 /// Halvings of the step towards an unsound iterate tried before giving up on it.

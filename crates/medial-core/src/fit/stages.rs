@@ -398,6 +398,53 @@ mod tests {
         }
     }
 
+    /// An unsound iterate makes L-BFGS back off and restart with fresh memory, up to
+    /// `max_restarts` times; with 0 the first one ends the minimisation (a start's trial).
+    /// Here every iterate that lowers the objective by more than a tenth is refused.
+    #[test]
+    fn a_minimisation_restarts_after_an_unsound_iterate_up_to_its_limit() {
+        use crate::fit::objective::{Evaluation, Objective};
+        use crate::fit::optimize::{minimize, Minimization, Start};
+        let case = Case::new();
+        let objective = Objective::new(&case.flow, &case.initial, &case.ssd, 1.0);
+        let start = objective
+            .evaluate(&vec![0.0; case.flow.momenta_len()], None)
+            .unwrap();
+        let check = |e: &Evaluation| match e.total < 0.9 * start.total {
+            true => Err(crate::fit::Unsound::NonFinite("a test's refusal".into())),
+            false => Ok(()),
+        };
+        let run = |max_restarts| {
+            let options = LbfgsOptions {
+                max_iterations: 50,
+                max_restarts,
+                ..LbfgsOptions::default()
+            };
+            let zero = Start::Momenta(vec![0.0; case.flow.momenta_len()]);
+            match minimize(&objective, zero, &options, check, &|| false, |_| {}).unwrap() {
+                Minimization::Done(m) => m,
+                Minimization::Paused(_) => unreachable!("never asked to pause"),
+            }
+        };
+        let (once, default) = (run(0), run(LbfgsOptions::default().max_restarts));
+        assert!(
+            matches!(once.stop, StopReason::Unsound(_)),
+            "{:?}",
+            once.stop
+        );
+        assert_eq!(once.restarts, 0);
+        assert!(
+            matches!(default.stop, StopReason::Unsound(_)),
+            "{:?}",
+            default.stop
+        );
+        assert!(default.restarts > 0, "{default:?}");
+        assert!(once.evaluations < default.evaluations);
+        for m in [&once, &default] {
+            assert!(m.evaluation.total >= 0.9 * start.total);
+        }
+    }
+
     #[test]
     fn a_fit_paused_anywhere_and_resumed_ends_with_the_same_bits() {
         let case = Case::new();

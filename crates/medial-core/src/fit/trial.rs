@@ -97,7 +97,8 @@ pub struct StartTrial {
 /// The fit of `spec` cut to its first progress window: its first stage's first AL iteration
 /// for the stage's [`ProgressRule::window`] L-BFGS iterations (else [`TRIAL_ITERATIONS`]), in
 /// the coarse time steps where that AL iteration would run coarse, with no extension or
-/// settling. What the trials of two starts reach is then what the fit would have reached from
+/// settling, ending at its first unsound iterate (a start whose trial folds is not taken, so
+/// nothing is gained by backing off and trying again). What the trials of two starts reach is then what the fit would have reached from
 /// each at that point.
 pub fn trial_spec(spec: &FitSpec) -> Result<FitSpec> {
     let first = spec
@@ -111,6 +112,7 @@ pub fn trial_spec(spec: &FitSpec) -> Result<FitSpec> {
         .map_or(TRIAL_ITERATIONS, |p: ProgressRule| p.window);
     stage.lbfgs.max_iterations = window;
     stage.lbfgs.progress = None;
+    stage.lbfgs.max_restarts = 0;
     stage.schedule.first_iterations = Some(window);
     stage.schedule.iterations = 1;
     stage.schedule.extend = None;
@@ -305,6 +307,7 @@ mod tests {
         assert_eq!(cut.schedule.iterations, 1);
         assert!(cut.schedule.extend.is_none() && cut.schedule.settle.is_none());
         assert!(cut.schedule.coarse.is_none());
+        assert_eq!(cut.lbfgs.max_restarts, 0);
         assert_eq!(
             trial.flow.time_steps,
             first.schedule.coarse.unwrap().time_steps
