@@ -34,6 +34,7 @@ use crate::mesh::Bounds;
 use crate::model::constraints::MedialConstraints;
 use crate::model::Model;
 use crate::{Error, Result, TriMesh, Vec3};
+use std::sync::Arc;
 
 /// What a stage is fitted to, in memory.
 // A target is made once per stage and moved into it: the size of the image variant's header
@@ -68,17 +69,18 @@ impl Target {
 
 /// A stage ready to run.
 pub struct PreparedStage {
-    /// The data term.
-    pub attachment: Box<dyn Attachment>,
+    /// The data term (shared by the stages prepared for models of one topology:
+    /// [`PreparedStage::for_model`]).
+    pub attachment: Arc<dyn Attachment>,
     /// Its weight `w_data` (a varifold's divided by the target's squared norm).
     pub data_weight: f64,
     /// SSD targets, to report the mean distance.
     pub ssd: Option<Ssd>,
     /// Dice stages: the binary foreground of the image (before smoothing), to report the voxel
     /// overlap of the rasterized model.
-    pub mask: Option<Volume>,
+    pub mask: Option<Arc<Volume>>,
     /// Varifold stages: the target surface, to report the distance of the model's boundary to it.
-    pub surface: Option<SurfaceDistance>,
+    pub surface: Option<Arc<SurfaceDistance>>,
     /// Varifold stages: the kernel width in use, mm (given, or chosen from the target surface).
     pub varifold_width: Option<f64>,
     /// The medial constraints, when they apply.
@@ -89,6 +91,27 @@ pub struct PreparedStage {
     pub schedule: AlSchedule,
     /// L-BFGS options.
     pub lbfgs: LbfgsOptions,
+    /// The topology of the model it was prepared for.
+    topology: Topology,
+}
+
+/// What a prepared stage's attachment depends on in a model: its boundary triangles, the atom
+/// of each boundary point and the number of landmarks (not where the landmarks are).
+#[derive(Clone, Debug, PartialEq)]
+struct Topology {
+    triangles: Vec<[usize; 3]>,
+    medial_index: Option<Vec<usize>>,
+    landmarks: usize,
+}
+
+impl Topology {
+    fn of(model: &Model) -> Self {
+        Self {
+            triangles: model.boundary_triangles().to_vec(),
+            medial_index: model.medial().map(|t| t.medial_index().to_vec()),
+            landmarks: model.landmarks().len(),
+        }
+    }
 }
 
 impl PreparedStage {
@@ -111,7 +134,7 @@ impl PreparedStage {
             attachment: stage.attachment.name(),
             target: target.kind(),
         };
-        let (attachment, data_weight): (Box<dyn Attachment>, _) = match (&stage.attachment, &target)
+        let (attachment, data_weight): (Arc<dyn Attachment>, _) = match (&stage.attachment, &target)
         {
             (AttachmentSpec::Ssd, Target::Points(_)) => {
                 let Target::Points(points) = target else {
@@ -125,22 +148,22 @@ impl PreparedStage {
                     });
                 }
                 let points = Ssd::new(points)?;
-                (Box::new(ssd.insert(points).clone()), weight)
+                (Arc::new(ssd.insert(points).clone()), weight)
             }
             (AttachmentSpec::Dice(spec), Target::Image { .. }) => {
                 let Target::Image { volume, label } = target else {
                     unreachable!("matched above")
                 };
                 let (dice, foreground) = dice(spec, model, volume, label, memory)?;
-                mask = Some(foreground);
-                (Box::new(dice), weight)
+                mask = Some(Arc::new(foreground));
+                (Arc::new(dice), weight)
             }
             (AttachmentSpec::Varifold(spec), Target::Surface(mesh)) => {
                 let varifold = varifold(spec, model, mesh)?;
-                surface = Some(SurfaceDistance::new(mesh)?);
+                surface = Some(Arc::new(SurfaceDistance::new(mesh)?));
                 varifold_width = Some(varifold.width());
                 let weight = weight / varifold.target_norm2();
-                (Box::new(varifold), weight)
+                (Arc::new(varifold), weight)
             }
             _ => return Err(wrong()),
         };
@@ -162,6 +185,38 @@ impl PreparedStage {
             tolerance: stage.tolerance,
             schedule: stage.schedule,
             lbfgs: stage.lbfgs,
+            topology: Topology::of(model),
+        })
+    }
+
+    /// This stage prepared for `model` instead, a model of the same topology (boundary
+    /// triangles, medial index, landmark count) at other landmarks: the attachment and the
+    /// target's data shared (an image smoothed once for several starts), the constraints taken
+    /// at `model` (relative units are scaled at its landmarks). A model of another topology is
+    /// refused.
+    pub fn for_model(&self, model: &Model) -> Result<Self> {
+        let topology = Topology::of(model);
+        if topology != self.topology {
+            return Err(Error::InvalidParameter(
+                "a stage prepared for one model cannot serve a model of another topology".into(),
+            ));
+        }
+        let constraints = match (&self.constraints, model.medial()) {
+            (Some(c), Some(template)) => Some(MedialConstraints::with_units(template, c.units())?),
+            _ => None,
+        };
+        Ok(Self {
+            attachment: Arc::clone(&self.attachment),
+            data_weight: self.data_weight,
+            ssd: self.ssd.clone(),
+            mask: self.mask.clone(),
+            surface: self.surface.clone(),
+            varifold_width: self.varifold_width,
+            constraints,
+            tolerance: self.tolerance,
+            schedule: self.schedule,
+            lbfgs: self.lbfgs,
+            topology,
         })
     }
 

@@ -91,6 +91,16 @@ impl Fit {
         Ok(Self::new(model, flow, stages))
     }
 
+    /// The same fit from `model`, a model of the same topology at other landmarks (another
+    /// start): its stages' attachments and target data shared, not prepared again
+    /// ([`PreparedStage::for_model`]).
+    pub fn for_model(&self, model: Model) -> Result<Self> {
+        let stages = (self.stages.iter())
+            .map(|p| p.for_model(&model))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self::new(model, self.flow.clone(), stages))
+    }
+
     /// The model the fit starts from.
     pub fn model(&self) -> &Model {
         &self.model

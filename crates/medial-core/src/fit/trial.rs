@@ -128,13 +128,16 @@ pub fn trial_spec(spec: &FitSpec) -> Result<FitSpec> {
 }
 
 /// The trial of `candidate` ([`trial_spec`] of `spec`) against `target`, whose foreground is
-/// `mask` for an image. A trial that ends unsound or fails to run is reported so; only a
-/// memory limit (which every candidate would meet alike) is an error.
+/// `mask` for an image; the stages prepared for an earlier candidate of the same topology in
+/// `shared` serve it too (the image smoothed once), and a candidate that prepares fully leaves
+/// its own there. A trial that ends unsound or fails to run is reported so; only a memory limit
+/// (which every candidate would meet alike) is an error.
 fn run_trial(
     candidate: &Candidate,
     spec: &FitSpec,
     target: &Target,
     mask: Option<&Volume>,
+    shared: &mut Option<Fit>,
     memory: MemoryLimit,
 ) -> Result<StartTrial> {
     // The voxel Dice of the candidate's boundary with its landmarks at `q`.
@@ -158,13 +161,21 @@ fn run_trial(
         unsound: None,
         taken: false,
     };
-    let fit = match Fit::prepare(spec, candidate.model.clone(), vec![target.clone()], memory) {
-        Ok(fit) => fit,
-        Err(e @ Error::Memory { .. }) => return Err(e),
-        Err(e) => {
-            trial.unsound = Some(e.to_string());
-            return Ok(trial);
-        }
+    if trial.voxel_dice_start == Some(0.0) {
+        trial.unsound = Some("its boundary does not overlap the foreground".into());
+        return Ok(trial);
+    }
+    let reused = (shared.as_ref()).and_then(|fit| fit.for_model(candidate.model.clone()).ok());
+    let fit = match reused {
+        Some(fit) => fit,
+        None => match Fit::prepare(spec, candidate.model.clone(), vec![target.clone()], memory) {
+            Ok(fit) => shared.insert(fit).for_model(candidate.model.clone())?,
+            Err(e @ Error::Memory { .. }) => return Err(e),
+            Err(e) => {
+                trial.unsound = Some(e.to_string());
+                return Ok(trial);
+            }
+        },
     };
     let ran = fit.run(|_| {});
     trial.seconds = clock.elapsed().as_secs_f64();
@@ -210,9 +221,10 @@ pub fn choose(
         Target::Image { volume, label } => Some(volume.foreground(*label)),
         _ => None,
     };
+    let mut shared = None;
     let mut trials = candidates
         .iter()
-        .map(|c| run_trial(c, &short, target, mask.as_ref(), memory))
+        .map(|c| run_trial(c, &short, target, mask.as_ref(), &mut shared, memory))
         .collect::<Result<Vec<_>>>()?;
     let best = trials
         .iter()
@@ -383,6 +395,8 @@ mod tests {
             line.contains("away: voxel Dice 0.000, not taken: "),
             "{line}"
         );
+        // Reversed, the thin and the wall starts swap which is prepared afresh and which
+        // shares the other's prepared stage: the same objectives say sharing changes no bit.
         candidates.reverse();
         let (again, reversed) = choose(candidates, &spec, &target, MemoryLimit::none()).unwrap();
         assert_eq!(again.name, taken.name);
