@@ -27,7 +27,9 @@
 //! assert_eq!(aligned.template.landmark_count(), case.template().landmark_count());
 //! ```
 
-use crate::construction::inflate::self_intersections;
+#[cfg(doc)]
+use crate::construction::inflate::LIMIT_ROUNDS;
+use crate::construction::inflate::{halve_at_crossings, self_intersections};
 use crate::construction::project::{project, ConstraintFigures, ProjectOptions};
 use crate::fit::align::{
     affine_between, align_affine, align_similarity, anisotropy, explained_spread,
@@ -41,9 +43,6 @@ use crate::mesh::carry_points;
 use crate::mesh::topology::{check_closed_oriented_manifold, check_outward};
 use crate::model::constraints::MedialConstraints;
 use crate::model::template::MedialTemplate;
-use crate::synth::halve_at_crossings;
-#[cfg(doc)]
-use crate::synth::LIMIT_ROUNDS;
 use crate::{Error, Result, TriMesh, Vec3};
 use nalgebra::Matrix4;
 
@@ -86,7 +85,8 @@ pub struct InitialAlignment {
 }
 
 impl InitialAlignment {
-    fn similarity(matrix: Matrix4<f64>, notes: Vec<String>) -> Self {
+    /// The similarity `matrix` as the whole map, with `notes`.
+    pub(crate) fn similarity(matrix: Matrix4<f64>, notes: Vec<String>) -> Self {
         Self {
             matrix,
             similarity: matrix,
@@ -364,7 +364,8 @@ pub fn thickened(
             })
             .collect();
         let carried = template.with_landmarks(&moved).ok()?;
-        let crossing = self_intersections(&carried.boundary_mesh().ok()?);
+        let thick = carried.boundary_mesh().ok()?;
+        let crossing = self_intersections(&thick);
         let (mesh, crossing) = if crossing.is_empty() {
             let projected = project(&carried, &ProjectOptions::default()).ok()?.template;
             let boundary = projected.boundary_mesh().ok()?;
@@ -377,7 +378,7 @@ pub fn thickened(
             }
             (boundary, crossing)
         } else {
-            (carried.boundary_mesh().ok()?, crossing)
+            (thick, crossing)
         };
         halve_at_crossings(&mut factors, &mesh, &crossing, atom_of);
     }
@@ -405,8 +406,9 @@ mod tests {
     /// sound after the projection; a factor the sheet holds is uniform, nothing limited.
     #[test]
     fn a_thickened_start_is_uniform_where_the_sheet_holds_it_and_limited_where_not() {
+        use crate::construction::inflate::LIMIT_ROUNDS;
         use crate::model::TemplateSummary;
-        use crate::synth::{Shape, SyntheticCase, LIMIT_ROUNDS};
+        use crate::synth::{Shape, SyntheticCase};
         let case = SyntheticCase::build(Shape::Toy).unwrap();
         let t = case.template();
         assert!(thickened(t, 1.7, 0).is_none());

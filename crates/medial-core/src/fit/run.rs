@@ -16,6 +16,7 @@
 //! let fitted = fit.flow().shoot(fit.model().landmarks(), &outcomes.last().unwrap().momenta);
 //! ```
 
+use crate::construction::inflate::LIMIT_ROUNDS;
 use crate::fit::augmented_lagrangian::{Constraints, Stage, StageOutcome};
 use crate::fit::guard::Guard;
 use crate::fit::initial::{
@@ -32,7 +33,6 @@ use crate::memory::MemoryLimit;
 use crate::mesh::PrincipalAxes;
 use crate::model::MedialTemplate;
 use crate::model::Model;
-use crate::synth::LIMIT_ROUNDS;
 use crate::Result;
 use nalgebra::Matrix4;
 
@@ -214,24 +214,19 @@ fn image_candidates(
     mask: &crate::image::Volume,
     notes: &mut Vec<String>,
 ) -> Result<Vec<Candidate>> {
-    let mut starts = Vec::new();
-    if let Some((name, thick)) = thicker_start(&aligned, ratio, notes) {
-        starts.push((name, thick, matrix));
-    }
-    starts.insert(0, ("aligned".to_string(), aligned, matrix));
-    if matrix != Matrix4::identity() {
-        let unmoved = InitialAlignment {
-            matrix: Matrix4::identity(),
-            similarity: Matrix4::identity(),
-            notes: Vec::new(),
-            thickness_ratio: None,
-        };
-        starts.push((
-            "as given".to_string(),
-            align_template(template, &unmoved)?.template,
-            Matrix4::identity(),
-        ));
-    }
+    let thick = thicker_start(&aligned, ratio, notes).map(|(name, thick)| (name, thick, matrix));
+    let unmoved = (matrix != Matrix4::identity())
+        .then(|| {
+            let unmoved = InitialAlignment::similarity(Matrix4::identity(), Vec::new());
+            align_template(template, &unmoved)
+                .map(|a| ("as given".to_string(), a.template, Matrix4::identity()))
+        })
+        .transpose()?;
+    let starts: Vec<(String, MedialTemplate, Matrix4<f64>)> =
+        std::iter::once(("aligned".to_string(), aligned, matrix))
+            .chain(thick)
+            .chain(unmoved)
+            .collect();
     let overlaps = starts
         .iter()
         .map(|(_, t, _)| voxel_dice(&t.boundary_mesh()?, mask))
@@ -240,7 +235,9 @@ fn image_candidates(
     let mut candidates = Vec::new();
     for ((name, start, matrix), dice) in starts.into_iter().zip(overlaps) {
         if dice >= TRIAL_OVERLAP_SHARE * best {
-            candidates.push(Candidate::new(name, Model::Medial(Box::new(start)), matrix));
+            let mut candidate = Candidate::new(name, Model::Medial(Box::new(start)), matrix);
+            candidate.overlap = Some(dice);
+            candidates.push(candidate);
         } else {
             notes.push(format!(
                 "start {name} not tried: voxel Dice {dice:.3}, under {TRIAL_OVERLAP_SHARE} of \
@@ -298,25 +295,26 @@ pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<
             let aligned = align_template(template, &alignment)?;
             alignment.notes.extend(aligned.notes);
             alignment.matrix = aligned.matrix;
-            let candidates = match (target, alignment.thickness_ratio) {
-                (Target::Image { volume, label }, Some(ratio)) => {
-                    let mask = volume.foreground(*label);
-                    image_candidates(
-                        template,
-                        aligned.template,
-                        alignment.matrix,
-                        ratio,
-                        &mask,
-                        &mut alignment.notes,
-                    )?
-                }
+            let mask = match target {
+                Target::Image { volume, label } => Some(volume.foreground(*label)),
+                _ => None,
+            };
+            let candidates = match (&mask, alignment.thickness_ratio) {
+                (Some(mask), Some(ratio)) => image_candidates(
+                    template,
+                    aligned.template,
+                    alignment.matrix,
+                    ratio,
+                    mask,
+                    &mut alignment.notes,
+                )?,
                 _ => vec![Candidate::new(
                     "aligned",
                     Model::Medial(Box::new(aligned.template)),
                     alignment.matrix,
                 )],
             };
-            let (taken, tried) = choose(candidates, &spec, target, memory)?;
+            let (taken, tried) = choose(candidates, &spec, target, mask.as_ref(), memory)?;
             alignment.notes.extend(describe(&tried));
             trials = tried;
             alignment.matrix = taken.alignment;

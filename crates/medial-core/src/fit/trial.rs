@@ -26,7 +26,7 @@
 //!     Candidate::new("aligned", aligned, nalgebra::Matrix4::identity()),
 //!     Candidate::new("as given", given, nalgebra::Matrix4::identity()),
 //! ];
-//! let (taken, trials) = choose(candidates, &spec, &target, MemoryLimit::none()).unwrap();
+//! let (taken, trials) = choose(candidates, &spec, &target, None, MemoryLimit::none()).unwrap();
 //! println!("{} ({} trials)", taken.name, trials.len());
 //! ```
 
@@ -55,6 +55,9 @@ pub struct Candidate {
     pub model: Model,
     /// The map that carries the given template's space to this start's (template → subject).
     pub alignment: Matrix4<f64>,
+    /// Its voxel Dice against the target's foreground, where the caller has it already (none:
+    /// the trial measures it).
+    pub overlap: Option<f64>,
 }
 
 impl Candidate {
@@ -64,6 +67,7 @@ impl Candidate {
             name: name.into(),
             model,
             alignment,
+            overlap: None,
         }
     }
 }
@@ -85,7 +89,7 @@ pub struct StartTrial {
     pub iterations: usize,
     /// Value + gradient evaluations run.
     pub evaluations: usize,
-    /// Wall-clock time of the trial, its preparation included, s.
+    /// Wall-clock time of the trial, its preparation and overlaps included, s.
     pub seconds: f64,
     /// Why the trial ended unsound, or could not run.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -129,9 +133,9 @@ pub fn trial_spec(spec: &FitSpec) -> Result<FitSpec> {
 
 /// The trial of `candidate` ([`trial_spec`] of `spec`) against `target`, whose foreground is
 /// `mask` for an image; the stages prepared for an earlier candidate of the same topology in
-/// `shared` serve it too (the image smoothed once), and a candidate that prepares fully leaves
+/// `shared` serve it too (the image smoothed once), and a candidate that prepares afresh leaves
 /// its own there. A trial that ends unsound or fails to run is reported so; only a memory limit
-/// (which every candidate would meet alike) is an error.
+/// (which every candidate would meet alike) is an error. Its `seconds` are the caller's.
 fn run_trial(
     candidate: &Candidate,
     spec: &FitSpec,
@@ -149,10 +153,9 @@ fn run_trial(
         };
         voxel_dice(&boundary, mask).ok()
     };
-    let clock = std::time::Instant::now();
     let mut trial = StartTrial {
         start: candidate.name.clone(),
-        voxel_dice_start: dice_of(candidate.model.landmarks()),
+        voxel_dice_start: (candidate.overlap).or_else(|| dice_of(candidate.model.landmarks())),
         voxel_dice: None,
         objective: None,
         iterations: 0,
@@ -166,10 +169,10 @@ fn run_trial(
         return Ok(trial);
     }
     let reused = (shared.as_ref()).and_then(|fit| fit.for_model(candidate.model.clone()).ok());
-    let fit = match reused {
+    let fit: &Fit = match &reused {
         Some(fit) => fit,
         None => match Fit::prepare(spec, candidate.model.clone(), vec![target.clone()], memory) {
-            Ok(fit) => shared.insert(fit).for_model(candidate.model.clone())?,
+            Ok(fit) => shared.insert(fit),
             Err(e @ Error::Memory { .. }) => return Err(e),
             Err(e) => {
                 trial.unsound = Some(e.to_string());
@@ -177,9 +180,7 @@ fn run_trial(
             }
         },
     };
-    let ran = fit.run(|_| {});
-    trial.seconds = clock.elapsed().as_secs_f64();
-    let outcome = match ran {
+    let outcome = match fit.run(|_| {}) {
         Ok(mut outcomes) => outcomes.pop().expect("one stage"),
         Err(e) => {
             trial.unsound = Some(e.to_string());
@@ -201,13 +202,15 @@ fn run_trial(
 }
 
 /// The candidate an automatic fit of `spec` to `target` starts from, and the trials that chose
-/// it (see the module doc). One candidate is taken without a trial; where no trial is sound
-/// the first candidate is taken (the fit's own recovery then deals with its start). Candidates
-/// are in order of preference: the first wins a tie.
+/// it (see the module doc); `mask`, the target's foreground where it is an image, gives the
+/// voxel Dice the trials report (none: not reported). One candidate is taken without a trial;
+/// where no trial is sound the first candidate is taken (the fit's own recovery then deals with
+/// its start). Candidates are in order of preference: the first wins a tie.
 pub fn choose(
     mut candidates: Vec<Candidate>,
     spec: &FitSpec,
     target: &Target,
+    mask: Option<&Volume>,
     memory: MemoryLimit,
 ) -> Result<(Candidate, Vec<StartTrial>)> {
     if candidates.len() <= 1 {
@@ -217,14 +220,15 @@ pub fn choose(
         return Ok((first, Vec::new()));
     }
     let short = trial_spec(spec)?;
-    let mask = match target {
-        Target::Image { volume, label } => Some(volume.foreground(*label)),
-        _ => None,
-    };
     let mut shared = None;
     let mut trials = candidates
         .iter()
-        .map(|c| run_trial(c, &short, target, mask.as_ref(), &mut shared, memory))
+        .map(|c| {
+            let clock = std::time::Instant::now();
+            let mut trial = run_trial(c, &short, target, mask, &mut shared, memory)?;
+            trial.seconds = clock.elapsed().as_secs_f64();
+            Ok(trial)
+        })
         .collect::<Result<Vec<_>>>()?;
     let best = trials
         .iter()
@@ -242,7 +246,7 @@ pub fn choose(
 /// One line of notes for `trials` (empty when there was none): each start's overlap before and
 /// after its trial, its objective, and which was taken.
 pub fn describe(trials: &[StartTrial]) -> Option<String> {
-    let first = trials.first()?;
+    trials.first()?;
     let each: Vec<String> = trials
         .iter()
         .map(|t| {
@@ -261,13 +265,8 @@ pub fn describe(trials: &[StartTrial]) -> Option<String> {
         })
         .collect();
     Some(format!(
-        "start chosen by a trial of the fit's first {} L-BFGS iterations from each candidate \
+        "start chosen by a trial of the fit's first progress window from each candidate \
          ({} evaluations, {:.1} s in all): {}",
-        trials
-            .iter()
-            .map(|t| t.iterations)
-            .max()
-            .unwrap_or(first.iterations),
         trials.iter().map(|t| t.evaluations).sum::<usize>(),
         trials.iter().map(|t| t.seconds).sum::<f64>(),
         each.join("; ")
@@ -297,6 +296,14 @@ mod tests {
         Target::Image {
             volume: rasterize(&boundary, dims, grid).unwrap(),
             label: None,
+        }
+    }
+
+    /// The foreground of an image target.
+    fn mask(target: &Target) -> Volume {
+        match target {
+            Target::Image { volume, label } => volume.foreground(*label),
+            _ => unreachable!("the tests' targets are images"),
         }
     }
 
@@ -348,8 +355,14 @@ mod tests {
             medial("thin", sheet(0.5, Vec3::zeros())),
             medial("wall", sheet(0.7, Vec3::zeros())),
         ];
-        let (taken, trials) =
-            choose(candidates.clone(), &spec, &target, MemoryLimit::none()).unwrap();
+        let (taken, trials) = choose(
+            candidates.clone(),
+            &spec,
+            &target,
+            Some(&mask(&target)),
+            MemoryLimit::none(),
+        )
+        .unwrap();
         let by_name = |name: &str| trials.iter().find(|t| t.start == name).unwrap();
         let (away, plain, thin, wall) = (
             by_name("away"),
@@ -398,7 +411,14 @@ mod tests {
         // Reversed, the thin and the wall starts swap which is prepared afresh and which
         // shares the other's prepared stage: the same objectives say sharing changes no bit.
         candidates.reverse();
-        let (again, reversed) = choose(candidates, &spec, &target, MemoryLimit::none()).unwrap();
+        let (again, reversed) = choose(
+            candidates,
+            &spec,
+            &target,
+            Some(&mask(&target)),
+            MemoryLimit::none(),
+        )
+        .unwrap();
         assert_eq!(again.name, taken.name);
         let objectives = |t: &[StartTrial]| {
             let mut o: Vec<_> = t.iter().map(|t| (t.start.clone(), t.objective)).collect();
@@ -418,11 +438,18 @@ mod tests {
         let same = || medial("same", sheet(0.6, Vec3::zeros()));
         let mut second = same();
         second.name = "second".into();
-        let (taken, trials) =
-            choose(vec![same(), second], &spec, &target, MemoryLimit::none()).unwrap();
+        let (taken, trials) = choose(
+            vec![same(), second],
+            &spec,
+            &target,
+            None,
+            MemoryLimit::none(),
+        )
+        .unwrap();
         assert_eq!(taken.name, "same");
         assert_eq!(trials[0].objective, trials[1].objective);
-        let (taken, trials) = choose(vec![same()], &spec, &target, MemoryLimit::none()).unwrap();
+        let (taken, trials) =
+            choose(vec![same()], &spec, &target, None, MemoryLimit::none()).unwrap();
         assert_eq!(taken.name, "same");
         assert!(trials.is_empty() && describe(&trials).is_none());
     }

@@ -44,7 +44,6 @@ pub use shape::{
 };
 pub use sheets::{parameter_grid, ParameterGrid};
 pub use stress::{
-    degrade, halve_at_crossings, seeded_directions, Degradation, Degraded, Region, Thickened,
-    Thickening, LIMIT_ROUNDS,
+    degrade, seeded_directions, Degradation, Degraded, Region, Thickened, Thickening,
 };
 pub use warp::Warp;

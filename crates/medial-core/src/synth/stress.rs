@@ -7,7 +7,7 @@
 //! difference for statistics). [`degrade`] flips boundary voxels of a segmentation at random
 //! and cuts small balls out of it, seeded, as a rater or a threshold would.
 
-use crate::construction::inflate::self_intersections;
+use crate::construction::inflate::{halve_at_crossings, self_intersections, LIMIT_ROUNDS};
 use crate::image::volume::Volume;
 use crate::model::template::MedialTemplate;
 use crate::{Error, Result, TriMesh, Vec3};
@@ -146,31 +146,6 @@ impl Thickening {
         }
     }
 }
-
-/// Halves the change `f − 1` of the atoms' `factors` at every atom of the triangles of `mesh`
-/// (a template's boundary, `atom_of` its medial index) in the `crossing` pairs
-/// ([`self_intersections`]): the limit of [`Thickening::boundary`], one round of it.
-pub fn halve_at_crossings(
-    factors: &mut [f64],
-    mesh: &TriMesh,
-    crossing: &[(usize, usize)],
-    atom_of: &[usize],
-) {
-    let mut atoms: Vec<usize> = (crossing.iter())
-        .flat_map(|&(f, g)| [f, g])
-        .flat_map(|t| mesh.triangles()[t])
-        .map(|b| atom_of[b])
-        .collect();
-    atoms.sort_unstable();
-    atoms.dedup();
-    for a in atoms {
-        factors[a] = 1.0 + 0.5 * (factors[a] - 1.0);
-    }
-}
-
-/// How many times at most [`Thickening::boundary`] halves the change asked at the atoms of
-/// crossing triangles: down to 1/1024 of it.
-pub const LIMIT_ROUNDS: u32 = 10;
 
 /// A thickened wall ([`Thickening::boundary`]).
 #[derive(Clone, Debug)]

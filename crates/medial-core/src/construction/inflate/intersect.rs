@@ -7,6 +7,33 @@ use super::geometry::corners;
 use crate::mesh::Bounds;
 use crate::{TriMesh, Vec3};
 
+/// Halves the change `f − 1` of the atoms' `factors` at every atom of the triangles of `mesh`
+/// (a template's boundary, `atom_of` its medial index) in the `crossing` pairs
+/// ([`self_intersections`]): one round of the limit of a thickened wall where the sheet cannot
+/// hold it (a synthetic thickening, [`crate::synth::Thickening::boundary`], and an automatic
+/// fit's thickened start, [`crate::fit::initial::thickened`]).
+pub fn halve_at_crossings(
+    factors: &mut [f64],
+    mesh: &TriMesh,
+    crossing: &[(usize, usize)],
+    atom_of: &[usize],
+) {
+    let mut atoms: Vec<usize> = (crossing.iter())
+        .flat_map(|&(f, g)| [f, g])
+        .flat_map(|t| mesh.triangles()[t])
+        .map(|b| atom_of[b])
+        .collect();
+    atoms.sort_unstable();
+    atoms.dedup();
+    for a in atoms {
+        factors[a] = 1.0 + 0.5 * (factors[a] - 1.0);
+    }
+}
+
+/// How many times at most a thickened wall's change is halved at the atoms of crossing
+/// triangles ([`halve_at_crossings`]): down to 1/1024 of it.
+pub const LIMIT_ROUNDS: u32 = 10;
+
 /// Distances to a plane below `SNAP · (diagonal of the bounding box)` count as zero in the
 /// triangle–triangle intersection test.
 pub(super) const SNAP: f64 = 1e-10;

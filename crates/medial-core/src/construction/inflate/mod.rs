@@ -34,7 +34,7 @@ mod limit;
 mod regions;
 mod sheet;
 
-pub use intersect::self_intersections;
+pub use intersect::{halve_at_crossings, self_intersections, LIMIT_ROUNDS};
 pub use limit::RadiusLimit;
 pub(crate) use regions::UnionFind;
 pub use sheet::MedialSheet;
