@@ -444,7 +444,8 @@ pub const PLAIN_ITERATIONS: usize = 300;
 ///   at kernel width [`plain_sigma`]; an image is refused (the Dice term samples a medial
 ///   template's interior).
 ///
-/// The kernel is truncated when few landmark pairs are near ([`kernel_tolerance`]).
+/// The kernel is truncated when few landmark pairs of the model as given are near
+/// ([`kernel_tolerance`]); [`crate::fit::run::automatic`] decides again at the start it takes.
 pub fn automatic(model: &Model, target: &Target) -> Result<FitSpec> {
     match model {
         Model::Medial(template) => automatic_medial(template, target),

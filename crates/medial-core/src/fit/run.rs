@@ -282,9 +282,12 @@ impl AutomaticStart {
 /// chosen among the candidates (the aligned, the thickened, the given template) by a short
 /// trial of the fit from each ([`choose`]). Voxels for rasterizing a closed surface to align
 /// to: half the mean spoke ([`Geometry::alignment_spacing`]), or a 128th of a plain mesh's long
-/// extent.
+/// extent. Whether the kernel is truncated ([`plan::kernel_tolerance`]) is decided again at the
+/// start taken: what the truncated sweep skips depends on where the landmarks the fit moves
+/// are, and the alignment may have scaled the template (the trials run with the plan's choice:
+/// truncation changes their objectives by at most the kernel's tolerance).
 pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<AutomaticStart> {
-    let spec = plan::automatic(model, target)?;
+    let mut spec = plan::automatic(model, target)?;
     let mut trials = Vec::new();
     let (alignment, start): (InitialAlignment, Model) = match model {
         Model::Medial(template) => {
@@ -327,6 +330,7 @@ pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<
             (alignment, Model::Plain(carried))
         }
     };
+    spec.flow.kernel_tolerance = plan::kernel_tolerance(spec.flow.sigma, start.landmarks());
     Ok(AutomaticStart {
         spec,
         model: start,
@@ -334,4 +338,27 @@ pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<
         notes: alignment.notes,
         trials,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testing::meshes::octahedron;
+
+    /// The plan decides truncation on the model as given; the start the alignment carries it to
+    /// may spread its landmarks far wider against the same σ, and the fit truncates then.
+    #[test]
+    fn truncation_is_decided_at_the_start_taken() {
+        let (points, triangles) = octahedron();
+        let mesh = crate::TriMesh::new(points.clone(), triangles).unwrap();
+        let model = Model::Plain(mesh);
+        let target = Target::Points(points.iter().map(|p| p * 4.0).collect());
+        let plan = plan::automatic(&model, &target).unwrap();
+        assert_eq!(plan.flow.kernel_tolerance, 0.0, "every pair near as given");
+        let start = automatic(&model, &target, MemoryLimit::none()).unwrap();
+        let spread = |m: &Model| (m.landmarks()[0] - m.landmarks()[5]).norm();
+        assert!(spread(&start.model) > 3.9 * spread(&model));
+        assert_eq!(start.spec.flow.sigma, plan.flow.sigma);
+        assert_eq!(start.spec.flow.kernel_tolerance, plan::KERNEL_TOLERANCE);
+    }
 }
