@@ -31,11 +31,13 @@ pub fn rasterize(mesh: &TriMesh, dims: [usize; 3], voxel_to_world: Matrix4<f64>)
         .map(|p| (to_voxel * p.push(1.0)).xyz())
         .collect();
     let buckets = slice_buckets(&points, mesh.triangles(), dims[2]);
-    let data: Vec<f64> = buckets
-        .par_iter()
+    let mut data = vec![0.0; dims.iter().product()];
+    data.par_chunks_mut(dims[0] * dims[1])
+        .zip(&buckets)
         .enumerate()
-        .flat_map_iter(|(k, tris)| rasterize_slice(&points, mesh.triangles(), tris, k, dims))
-        .collect();
+        .for_each(|(k, (slice, tris))| {
+            rasterize_slice(slice, &points, mesh.triangles(), tris, k, dims)
+        });
     Volume::new(dims, data, voxel_to_world)
 }
 
@@ -167,14 +169,15 @@ fn index_range(values: [f64; 3], len: usize) -> std::ops::Range<usize> {
     (lo as usize).min(hi as usize)..hi as usize
 }
 
-/// The `nx·ny` voxel values of slice `k`.
+/// Writes the `nx·ny` voxel values of slice `k` (zero on entry) into `slice`.
 fn rasterize_slice(
+    slice: &mut [f64],
     points: &[Vec3],
     triangles: &[[usize; 3]],
     candidates: &[usize],
     k: usize,
     dims: [usize; 3],
-) -> Vec<f64> {
+) {
     let [nx, ny, _] = dims;
     let mut crossings = vec![Vec::new(); ny];
     for &t in candidates {
@@ -185,12 +188,10 @@ fn rasterize_slice(
             }
         }
     }
-    let mut slice = vec![0.0; nx * ny];
     for (row, mut xs) in slice.chunks_mut(nx).zip(crossings) {
         xs.sort_unstable_by(f64::total_cmp);
         fill_row(row, &xs);
     }
-    slice
 }
 
 /// Sets `row[i] = 1` where an odd number of crossings lie below `i`.
