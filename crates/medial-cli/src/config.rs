@@ -306,7 +306,7 @@ mod varifold_kind {
 }
 
 /// The data a stage fits to, as files: what [`StageConfig::of_spec`] writes beside the settings.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Source {
     /// SSD: points in correspondence with the template boundary's.
     Target(PathBuf),

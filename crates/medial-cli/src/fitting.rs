@@ -93,6 +93,9 @@ pub struct Start {
     pub notes: Vec<String>,
     /// The trials that chose the start (in summary.json as `start_trials`).
     pub trials: Vec<medial_core::fit::trial::StartTrial>,
+    /// The stage the trials prepared against the fit's one target: its image is not read and
+    /// smoothed again ([`stage::prepare_all`]).
+    pub prepared: Option<PreparedStage>,
 }
 
 /// The config of a fit: `config` with the flags of `inputs` in place of its template and
@@ -174,6 +177,7 @@ fn automatic(inputs: &Inputs, out: &Path) -> Result<Resolved, CliError> {
             given: model,
             notes: start.notes,
             trials: start.trials,
+            prepared: start.prepared,
         }),
     })
 }
@@ -281,9 +285,19 @@ pub fn run(resolved: &Resolved, options: &FitOptions) -> Result<Summary, CliErro
     let mut config = resolved.config.clone();
     let mut retries = Vec::new();
     let mut set = None;
+    // Stages prepared before, with their sources: the trials' first stage for the first run,
+    // each run's stages for the retry after it.
+    let mut earlier = match &resolved.start {
+        Some(start) => {
+            let trials = Vec::from_iter(start.prepared.clone());
+            stage::by_source(&config, &trials)
+        }
+        None => Vec::new(),
+    };
     loop {
         let flow = flow_of(&config, model.landmarks().len())?;
-        let prepared = stage::prepare_all(&config, &model)?;
+        let prepared = stage::prepare_all(&config, &model, &earlier)?;
+        earlier = stage::by_source(&config, &prepared);
         let with_choices = stage::with_choices(&config, &prepared);
         let engine = medial_core::fit::run::Fit::new(model.clone(), flow, prepared);
         let planned = engine.planned();

@@ -102,12 +102,36 @@ pub fn prepare(
     })
 }
 
-/// Reads the data of every stage of `config` and prepares it for `model`.
-pub fn prepare_all(config: &Config, model: &Model) -> Result<Vec<PreparedStage>, CliError> {
+/// Reads the data of every stage of `config` and prepares it for `model`; a stage whose data
+/// a stage of `earlier` prepared against the same source serves ([`PreparedStage::shared`])
+/// neither reads nor prepares it again.
+pub fn prepare_all(
+    config: &Config,
+    model: &Model,
+    earlier: &[(Source, PreparedStage)],
+) -> Result<Vec<PreparedStage>, CliError> {
     config
         .stages
         .iter()
-        .map(|s| prepare(s, model, read_target(s, model)?))
+        .map(|s| {
+            let source = s.source().ok();
+            let same = earlier
+                .iter()
+                .filter(|(from, _)| Some(from) == source.as_ref())
+                .map(|(_, p)| p);
+            match PreparedStage::shared(same, &s.spec(), model)? {
+                Some(shared) => Ok(shared),
+                None => prepare(s, model, read_target(s, model)?),
+            }
+        })
+        .collect()
+}
+
+/// Each stage of `config` prepared in `prepared`, with its source: the `earlier` of a
+/// [`prepare_all`] that follows.
+pub fn by_source(config: &Config, prepared: &[PreparedStage]) -> Vec<(Source, PreparedStage)> {
+    (config.stages.iter().zip(prepared))
+        .filter_map(|(s, p)| Some((s.source().ok()?, p.clone())))
         .collect()
 }
 

@@ -67,7 +67,8 @@ impl Target {
     }
 }
 
-/// A stage ready to run.
+/// A stage ready to run (a clone shares its data term and target data).
+#[derive(Clone)]
 pub struct PreparedStage {
     /// The data term (shared by the stages prepared for models of one topology:
     /// [`PreparedStage::for_model`]).
@@ -93,6 +94,24 @@ pub struct PreparedStage {
     pub lbfgs: LbfgsOptions,
     /// The topology of the model it was prepared for.
     topology: Topology,
+    /// The settings its data term was prepared with ([`PreparedStage::for_stage`]).
+    data_settings: DataSettings,
+}
+
+/// The settings of a stage its data term depends on: the attachment and its weight.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct DataSettings {
+    attachment: AttachmentSpec,
+    weight: Option<f64>,
+}
+
+impl DataSettings {
+    fn of(stage: &StageSpec) -> Self {
+        Self {
+            attachment: stage.attachment,
+            weight: stage.weight,
+        }
+    }
 }
 
 /// What a prepared stage's attachment depends on in a model: its boundary triangles, the atom
@@ -124,10 +143,7 @@ impl PreparedStage {
         target: Target,
         memory: MemoryLimit,
     ) -> Result<Self> {
-        let constrained = stage.constraints.unwrap_or(model.medial().is_some());
-        if constrained && model.medial().is_none() {
-            return Err(Error::NeedsMedial("constraints = true"));
-        }
+        let constraints = constraints_of(stage, model)?;
         let weight = stage.data_weight();
         let (mut ssd, mut mask, mut surface, mut varifold_width) = (None, None, None, None);
         let wrong = || Error::WrongTarget {
@@ -167,13 +183,6 @@ impl PreparedStage {
             }
             _ => return Err(wrong()),
         };
-        let constraints = match model.medial().filter(|_| constrained) {
-            Some(template) => Some(MedialConstraints::with_units(
-                template,
-                stage.constraint_units,
-            )?),
-            None => None,
-        };
         Ok(Self {
             data_weight,
             attachment,
@@ -186,7 +195,42 @@ impl PreparedStage {
             schedule: stage.schedule,
             lbfgs: stage.lbfgs,
             topology: Topology::of(model),
+            data_settings: DataSettings::of(stage),
         })
+    }
+
+    /// `stage` for `model` from the first of `earlier` (stages prepared against the target
+    /// `stage` fits) whose data term serves it ([`PreparedStage::for_stage`]); none when none
+    /// does (prepare it with [`PreparedStage::new`]).
+    pub fn shared<'a>(
+        earlier: impl IntoIterator<Item = &'a PreparedStage>,
+        stage: &StageSpec,
+        model: &Model,
+    ) -> Result<Option<Self>> {
+        for e in earlier {
+            if let Some(shared) = e.for_stage(stage, model)? {
+                return Ok(Some(shared));
+            }
+        }
+        Ok(None)
+    }
+
+    /// `stage` prepared for `model` against the target this stage was prepared against, its
+    /// data term shared (an image read and smoothed once for the trials of the starts, the fit
+    /// and its retries), when `stage`'s data term has the same settings (attachment, weight)
+    /// and `model` the same topology; none otherwise (prepare it with [`PreparedStage::new`]).
+    /// Everything else (constraints, schedule, L-BFGS options, tolerance) is `stage`'s.
+    pub fn for_stage(&self, stage: &StageSpec, model: &Model) -> Result<Option<Self>> {
+        if DataSettings::of(stage) != self.data_settings || Topology::of(model) != self.topology {
+            return Ok(None);
+        }
+        Ok(Some(Self {
+            constraints: constraints_of(stage, model)?,
+            tolerance: stage.tolerance,
+            schedule: stage.schedule,
+            lbfgs: stage.lbfgs,
+            ..self.clone()
+        }))
     }
 
     /// This stage prepared for `model` instead, a model of the same topology (boundary
@@ -206,17 +250,8 @@ impl PreparedStage {
             _ => None,
         };
         Ok(Self {
-            attachment: Arc::clone(&self.attachment),
-            data_weight: self.data_weight,
-            ssd: self.ssd.clone(),
-            mask: self.mask.clone(),
-            surface: self.surface.clone(),
-            varifold_width: self.varifold_width,
             constraints,
-            tolerance: self.tolerance,
-            schedule: self.schedule,
-            lbfgs: self.lbfgs,
-            topology,
+            ..self.clone()
         })
     }
 
@@ -269,6 +304,20 @@ fn refine_margin(spec: &DiceSpec, volume: &Volume) -> usize {
 
 /// The Dice attachment of the model against the foreground of `volume`, smoothed, and the
 /// foreground itself (before smoothing).
+/// The medial constraints of `stage` for `model`, in the stage's units: where the stage asks
+/// for them (by default for a medial template); a plain mesh asked for them is refused.
+fn constraints_of(stage: &StageSpec, model: &Model) -> Result<Option<MedialConstraints>> {
+    let constrained = stage.constraints.unwrap_or(model.medial().is_some());
+    match (constrained, model.medial()) {
+        (false, _) => Ok(None),
+        (true, None) => Err(Error::NeedsMedial("constraints = true")),
+        (true, Some(template)) => Ok(Some(MedialConstraints::with_units(
+            template,
+            stage.constraint_units,
+        )?)),
+    }
+}
+
 fn dice(
     spec: &DiceSpec,
     model: &Model,
@@ -330,4 +379,83 @@ fn dice(
         });
     }
     Ok((attachment, mask))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::run::Fit;
+    use crate::fit::spec::FlowSettings;
+    use crate::image::rasterize::{grid_around, rasterize};
+    use crate::testing::meshes::{bipyramid, octahedron};
+
+    /// The bipyramid of half thickness `r` scaled to 10 mm, and an image of it at half
+    /// thickness 0.7 at 1 mm voxels.
+    fn sheet(r: f64) -> Model {
+        let t = bipyramid(r);
+        let scaled: Vec<Vec3> = t.landmarks().iter().map(|p| p * 10.0).collect();
+        Model::Medial(Box::new(t.with_landmarks(&scaled).unwrap()))
+    }
+
+    fn image() -> Target {
+        let Model::Medial(wall) = sheet(0.7) else {
+            unreachable!("a medial template")
+        };
+        let boundary = wall.boundary_mesh().unwrap();
+        let (dims, grid) = grid_around(&boundary, 1.0, 4.0).unwrap();
+        Target::Image {
+            volume: rasterize(&boundary, dims, grid).unwrap(),
+            label: None,
+        }
+    }
+
+    /// A stage's data (the image smoothed) serves a stage of the same attachment and weight
+    /// for a model of the same topology elsewhere, with that stage's schedule and options and
+    /// its constraints at that model: a fit from it runs to the same bits as one prepared
+    /// afresh. Another attachment setting, another weight or another topology is not served.
+    #[test]
+    fn a_stage_shares_its_data_only_with_the_same_data_settings() {
+        let stage = StageSpec::new("dice", AttachmentSpec::Dice(DiceSpec::default()));
+        let (thin, thick) = (sheet(0.5), sheet(0.6));
+        let first = PreparedStage::new(&stage, &thin, image(), MemoryLimit::none()).unwrap();
+        let mut later = stage.clone();
+        later.schedule.mu = 7.0;
+        later.lbfgs.max_iterations = 4;
+        let shared = PreparedStage::shared([&first], &later, &thick)
+            .unwrap()
+            .unwrap();
+        assert!(Arc::ptr_eq(&shared.attachment, &first.attachment));
+        assert_eq!(
+            (shared.schedule, shared.lbfgs),
+            (later.schedule, later.lbfgs)
+        );
+        let fresh = PreparedStage::new(&later, &thick, image(), MemoryLimit::none()).unwrap();
+        let flow = FlowSettings {
+            sigma: 4.0,
+            time_steps: 4,
+            ..FlowSettings::default()
+        };
+        let run = |p: PreparedStage| {
+            let flow = flow.flow(thick.landmarks().len()).unwrap();
+            let outcome = Fit::new(thick.clone(), flow, vec![p]).run(|_| {}).unwrap();
+            (outcome[0].evaluation.total, outcome[0].momenta.clone())
+        };
+        assert_eq!(run(shared), run(fresh));
+
+        let mut sigma = stage.clone();
+        sigma.attachment = AttachmentSpec::Dice(DiceSpec {
+            image_sigma: 2.0 * DiceSpec::default().image_sigma + 0.1,
+            ..DiceSpec::default()
+        });
+        let mut weight = stage.clone();
+        weight.weight = Some(3.0);
+        for other in [&sigma, &weight] {
+            assert!(first.for_stage(other, &thick).unwrap().is_none());
+        }
+        let (points, triangles) = octahedron();
+        let plain = Model::Plain(TriMesh::new(points, triangles).unwrap());
+        let mut unconstrained = stage.clone();
+        unconstrained.constraints = Some(false);
+        assert!(first.for_stage(&unconstrained, &plain).unwrap().is_none());
+    }
 }

@@ -66,6 +66,19 @@ impl Fit {
         targets: Vec<Target>,
         memory: MemoryLimit,
     ) -> Result<Self> {
+        Self::prepare_sharing(spec, model, targets, memory, &[])
+    }
+
+    /// [`Fit::prepare`], each stage's data taken from `earlier` where it serves
+    /// ([`PreparedStage::shared`]): stages prepared against the same target as every stage of
+    /// `spec`.
+    fn prepare_sharing(
+        spec: &FitSpec,
+        model: Model,
+        targets: Vec<Target>,
+        memory: MemoryLimit,
+        earlier: &[PreparedStage],
+    ) -> Result<Self> {
         spec.check()?;
         if targets.len() != spec.stages.len() {
             return Err(crate::Error::ShapeMismatch {
@@ -86,7 +99,12 @@ impl Fit {
             .stages
             .iter()
             .zip(targets)
-            .map(|(stage, target)| PreparedStage::new(stage, &model, target, memory))
+            .map(
+                |(stage, target)| match PreparedStage::shared(earlier, stage, &model)? {
+                    Some(shared) => Ok(shared),
+                    None => PreparedStage::new(stage, &model, target, memory),
+                },
+            )
             .collect::<Result<Vec<_>>>()?;
         Ok(Self::new(model, flow, stages))
     }
@@ -114,6 +132,11 @@ impl Fit {
     /// The prepared stages.
     pub fn stages(&self) -> &[PreparedStage] {
         &self.stages
+    }
+
+    /// The prepared stages, the fit given up.
+    pub fn into_stages(self) -> Vec<PreparedStage> {
+        self.stages
     }
 
     /// The stages as the engine runs them ([`crate::fit::run_stages_resumable`]). Constrained
@@ -262,14 +285,19 @@ pub struct AutomaticStart {
     /// The trials that chose the start among several candidates ([`choose`]); empty when
     /// there was one.
     pub trials: Vec<StartTrial>,
+    /// The stage the trials prepared against the target ([`crate::fit::trial::Choice::prepared`]): a stage of the
+    /// fit with the same data settings takes its data from it.
+    pub prepared: Option<PreparedStage>,
 }
 
 impl AutomaticStart {
-    /// The fit from this start against `target` (every stage of an automatic plan fits the
-    /// one target).
+    /// The fit from this start against `target`, the target the start was chosen against
+    /// (every stage of an automatic plan fits the one target; a stage's data prepared by the
+    /// trials serves it again).
     pub fn fit(self, target: Target, memory: MemoryLimit) -> Result<Fit> {
         let targets = vec![target; self.spec.stages.len()];
-        Fit::prepare(&self.spec, self.model, targets, memory)
+        let earlier: Vec<_> = self.prepared.into_iter().collect();
+        Fit::prepare_sharing(&self.spec, self.model, targets, memory, &earlier)
     }
 }
 
@@ -288,7 +316,7 @@ impl AutomaticStart {
 /// truncation changes their objectives by at most the kernel's tolerance).
 pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<AutomaticStart> {
     let mut spec = plan::automatic(model, target)?;
-    let mut trials = Vec::new();
+    let (mut trials, mut prepared) = (Vec::new(), None);
     let (alignment, start): (InitialAlignment, Model) = match model {
         Model::Medial(template) => {
             let boundary = template.boundary_mesh()?;
@@ -317,11 +345,11 @@ pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<
                     alignment.matrix,
                 )],
             };
-            let (taken, tried) = choose(candidates, &spec, target, mask.as_ref(), memory)?;
-            alignment.notes.extend(describe(&tried));
-            trials = tried;
-            alignment.matrix = taken.alignment;
-            (alignment, taken.model)
+            let choice = choose(candidates, &spec, target, mask.as_ref(), memory)?;
+            alignment.notes.extend(describe(&choice.trials));
+            (trials, prepared) = (choice.trials, choice.prepared);
+            alignment.matrix = choice.taken.alignment;
+            (alignment, choice.taken.model)
         }
         Model::Plain(mesh) => {
             let axes = PrincipalAxes::of(mesh.points())?;
@@ -337,6 +365,7 @@ pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<
         alignment: alignment.matrix,
         notes: alignment.notes,
         trials,
+        prepared,
     })
 }
 

@@ -11,7 +11,8 @@
 //! whose trial ends at the lowest objective `E_AL` is taken; a start whose trial ends unsound
 //! (a fold, a flow past its strain limit) is not. The winner's fit then starts afresh from it
 //! (the trial is a judge, not a stage: a fit runs the same from the same start however it was
-//! chosen).
+//! chosen); only the data its first stage prepared (an image read and smoothed) serves the fit
+//! again ([`Choice::prepared`]).
 //!
 //! ```no_run
 //! use medial_core::fit::trial::{choose, Candidate};
@@ -26,12 +27,12 @@
 //!     Candidate::new("aligned", aligned, nalgebra::Matrix4::identity()),
 //!     Candidate::new("as given", given, nalgebra::Matrix4::identity()),
 //! ];
-//! let (taken, trials) = choose(candidates, &spec, &target, None, MemoryLimit::none()).unwrap();
-//! println!("{} ({} trials)", taken.name, trials.len());
+//! let choice = choose(candidates, &spec, &target, None, MemoryLimit::none()).unwrap();
+//! println!("{} ({} trials)", choice.taken.name, choice.trials.len());
 //! ```
 
 use crate::fit::optimize::ProgressRule;
-use crate::fit::prepare::Target;
+use crate::fit::prepare::{PreparedStage, Target};
 use crate::fit::run::Fit;
 use crate::fit::spec::FitSpec;
 use crate::image::rasterize::voxel_dice;
@@ -201,6 +202,18 @@ fn run_trial(
     Ok(trial)
 }
 
+/// What [`choose`] decided.
+pub struct Choice {
+    /// The candidate taken.
+    pub taken: Candidate,
+    /// The trials that chose it; empty when there was one candidate.
+    pub trials: Vec<StartTrial>,
+    /// The trials' stage as they prepared it against the target (none without trials, or when
+    /// none could be prepared): the fit's first stage takes its data from it
+    /// ([`PreparedStage::for_stage`]) instead of reading and smoothing its image again.
+    pub prepared: Option<PreparedStage>,
+}
+
 /// The candidate an automatic fit of `spec` to `target` starts from, and the trials that chose
 /// it (see the module doc); `mask`, the target's foreground where it is an image, gives the
 /// voxel Dice the trials report (none: not reported). One candidate is taken without a trial;
@@ -212,12 +225,16 @@ pub fn choose(
     target: &Target,
     mask: Option<&Volume>,
     memory: MemoryLimit,
-) -> Result<(Candidate, Vec<StartTrial>)> {
+) -> Result<Choice> {
     if candidates.len() <= 1 {
         let first = candidates
             .pop()
             .ok_or_else(|| Error::InvalidParameter("no candidate start to choose from".into()))?;
-        return Ok((first, Vec::new()));
+        return Ok(Choice {
+            taken: first,
+            trials: Vec::new(),
+            prepared: None,
+        });
     }
     let short = trial_spec(spec)?;
     let mut shared = None;
@@ -240,7 +257,11 @@ pub fn choose(
         })
         .map_or(0, |(i, _)| i);
     trials[best].taken = true;
-    Ok((candidates.swap_remove(best), trials))
+    Ok(Choice {
+        taken: candidates.swap_remove(best),
+        trials,
+        prepared: shared.and_then(|fit| fit.into_stages().pop()),
+    })
 }
 
 /// One line of notes for `trials` (empty when there was none): each start's overlap before and
@@ -355,7 +376,11 @@ mod tests {
             medial("thin", sheet(0.5, Vec3::zeros())),
             medial("wall", sheet(0.7, Vec3::zeros())),
         ];
-        let (taken, trials) = choose(
+        let Choice {
+            taken,
+            trials,
+            prepared,
+        } = choose(
             candidates.clone(),
             &spec,
             &target,
@@ -385,6 +410,8 @@ mod tests {
         );
         assert_eq!((away.evaluations, plain.evaluations), (0, 0));
         assert_eq!(away.voxel_dice_start, Some(0.0));
+        // The stage the trials prepared is handed on for the fit (the image smoothed once).
+        assert!(prepared.is_some_and(|p| p.mask.is_some()));
         for t in [thin, wall] {
             assert!(t.evaluations > 0 && t.unsound.is_none(), "{t:?}");
             assert!(t.voxel_dice.unwrap() > 0.95, "{t:?}");
@@ -411,7 +438,11 @@ mod tests {
         // Reversed, the thin and the wall starts swap which is prepared afresh and which
         // shares the other's prepared stage: the same objectives say sharing changes no bit.
         candidates.reverse();
-        let (again, reversed) = choose(
+        let Choice {
+            taken: again,
+            trials: reversed,
+            ..
+        } = choose(
             candidates,
             &spec,
             &target,
@@ -438,7 +469,7 @@ mod tests {
         let same = || medial("same", sheet(0.6, Vec3::zeros()));
         let mut second = same();
         second.name = "second".into();
-        let (taken, trials) = choose(
+        let Choice { taken, trials, .. } = choose(
             vec![same(), second],
             &spec,
             &target,
@@ -448,7 +479,7 @@ mod tests {
         .unwrap();
         assert_eq!(taken.name, "same");
         assert_eq!(trials[0].objective, trials[1].objective);
-        let (taken, trials) =
+        let Choice { taken, trials, .. } =
             choose(vec![same()], &spec, &target, None, MemoryLimit::none()).unwrap();
         assert_eq!(taken.name, "same");
         assert!(trials.is_empty() && describe(&trials).is_none());
