@@ -316,18 +316,25 @@ impl Grid {
         [p.x, p.y, p.z].map(|c| (c / cell).floor() as i64)
     }
 
-    /// The points within `radius ≤ cell` of `q`, ascending.
+    /// The points within `radius` of `q`, ascending: those of the cells the ball's bounding
+    /// box meets (for `radius ≤ cell` at most 8, often 1, where the 27 cells around `q` would
+    /// hold up to 27 cells of points to test).
     fn within(&self, positions: &[Vec3], q: Vec3, radius: f64) -> Vec<usize> {
-        let k = Self::key(&q, self.cell);
-        let mut found: Vec<usize> = (0..27)
-            .filter_map(|d| {
-                let o = [d % 3, (d / 3) % 3, d / 9].map(|o| o as i64 - 1);
-                self.cells.get(&[k[0] + o[0], k[1] + o[1], k[2] + o[2]])
-            })
-            .flatten()
-            .copied()
-            .filter(|&i| (positions[i] - q).norm() <= radius)
-            .collect();
+        let lo = Self::key(&(q - Vec3::repeat(radius)), self.cell);
+        let hi = Self::key(&(q + Vec3::repeat(radius)), self.cell);
+        let mut found = Vec::new();
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    let Some(cell) = self.cells.get(&[x, y, z]) else {
+                        continue;
+                    };
+                    found.extend(
+                        (cell.iter().copied()).filter(|&i| (positions[i] - q).norm() <= radius),
+                    );
+                }
+            }
+        }
         found.sort_unstable();
         found
     }
