@@ -10,6 +10,21 @@ fn read_summary(out: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
 }
 
+/// `medial fit --template TEMPLATE FLAG TARGET --out OUT -q`: an automatic fit (`FLAG` one of
+/// `--image`, `--target`, `--surface`).
+fn automatic_fit(template: &Path, flag: &str, target: &Path, out: &Path) -> std::process::Output {
+    medial(&[
+        "fit",
+        "--template",
+        s(template),
+        flag,
+        s(target),
+        "--out",
+        s(out),
+        "-q",
+    ])
+}
+
 #[test]
 fn an_automatic_fit_to_a_segmentation_is_medial_and_its_config_reruns_to_the_same_bits() {
     let dir = tempfile::tempdir().unwrap();
@@ -179,16 +194,12 @@ fn an_unequal_scaling_is_applied_and_projected_before_the_flow() {
     ]);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let out = dir.path().join("fit");
-    let o = medial(&[
-        "fit",
-        "--template",
-        s(&case.join("template.vtk")),
+    let o = automatic_fit(
+        &case.join("template.vtk"),
         "--target",
-        s(&case.join("target_boundary.vtk")),
-        "--out",
-        s(&out),
-        "-q",
-    ]);
+        &case.join("target_boundary.vtk"),
+        &out,
+    );
     let err = text(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(err.contains("initial affine: anisotropy 33.3 %"), "{err}");
@@ -236,16 +247,7 @@ fn a_plain_mesh_fits_without_a_config() {
     assert!(o.status.success(), "{}", text(&o.stderr));
     let source = examples.join("t001-bent/target_boundary.vtk");
     let out = dir.path().join("fit");
-    let o = medial(&[
-        "fit",
-        "--template",
-        s(&source),
-        "--target",
-        s(&case.join("target_boundary.vtk")),
-        "--out",
-        s(&out),
-        "-q",
-    ]);
+    let o = automatic_fit(&source, "--target", &case.join("target_boundary.vtk"), &out);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let summary = read_summary(&out);
     let stage = &summary["stages"][0];
@@ -361,16 +363,12 @@ fn an_automatic_fit_that_folds_runs_again_with_safer_settings_and_says_so() {
     ]);
     assert!(made.status.success(), "{}", text(&made.stderr));
     let out = dir.path().join("fit");
-    let o = medial(&[
-        "fit",
-        "--template",
-        s(&case.join("template.vtk")),
+    let o = automatic_fit(
+        &case.join("template.vtk"),
         "--image",
-        s(&case.join("target.nii.gz")),
-        "--out",
-        s(&out),
-        "-q",
-    ]);
+        &case.join("target.nii.gz"),
+        &out,
+    );
     let err = text(&o.stderr);
     let summary = read_summary(&out);
     let retries = summary["retries"].as_array().unwrap();
