@@ -288,10 +288,7 @@ pub fn run(resolved: &Resolved, options: &FitOptions) -> Result<Summary, CliErro
     // Stages prepared before, with their sources: the trials' first stage for the first run,
     // each run's stages for the retry after it.
     let mut earlier = match &resolved.start {
-        Some(start) => {
-            let trials = Vec::from_iter(start.prepared.clone());
-            stage::by_source(&config, &trials)
-        }
+        Some(start) => stage::by_source(&config, start.prepared.as_slice()),
         None => Vec::new(),
     };
     loop {

@@ -302,8 +302,6 @@ fn refine_margin(spec: &DiceSpec, volume: &Volume) -> usize {
     (4.0 * spec.image_sigma / volume.spacing().min()).ceil() as usize + 2
 }
 
-/// The Dice attachment of the model against the foreground of `volume`, smoothed, and the
-/// foreground itself (before smoothing).
 /// The medial constraints of `stage` for `model`, in the stage's units: where the stage asks
 /// for them (by default for a medial template); a plain mesh asked for them is refused.
 fn constraints_of(stage: &StageSpec, model: &Model) -> Result<Option<MedialConstraints>> {
@@ -318,6 +316,8 @@ fn constraints_of(stage: &StageSpec, model: &Model) -> Result<Option<MedialConst
     }
 }
 
+/// The Dice attachment of the model against the foreground of `volume`, smoothed, and the
+/// foreground itself (before smoothing).
 fn dice(
     spec: &DiceSpec,
     model: &Model,

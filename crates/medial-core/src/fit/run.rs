@@ -285,8 +285,9 @@ pub struct AutomaticStart {
     /// The trials that chose the start among several candidates ([`choose`]); empty when
     /// there was one.
     pub trials: Vec<StartTrial>,
-    /// The stage the trials prepared against the target ([`crate::fit::trial::Choice::prepared`]): a stage of the
-    /// fit with the same data settings takes its data from it.
+    /// The stage the trials prepared against the target
+    /// ([`crate::fit::trial::Choice::prepared`]): a stage of the fit with the same data
+    /// settings takes its data from it.
     pub prepared: Option<PreparedStage>,
 }
 
@@ -296,8 +297,8 @@ impl AutomaticStart {
     /// trials serves it again).
     pub fn fit(self, target: Target, memory: MemoryLimit) -> Result<Fit> {
         let targets = vec![target; self.spec.stages.len()];
-        let earlier: Vec<_> = self.prepared.into_iter().collect();
-        Fit::prepare_sharing(&self.spec, self.model, targets, memory, &earlier)
+        let earlier = self.prepared.as_slice();
+        Fit::prepare_sharing(&self.spec, self.model, targets, memory, earlier)
     }
 }
 

@@ -462,9 +462,9 @@ fn convolve_axis(input: &[f64], dims: [usize; 3], axis: usize, kernel: &[f64]) -
     let [nx, ny, nz] = dims;
     let radius = (kernel.len() / 2) as i64;
     let mut out = vec![0.0; input.len()];
-    // For each tap in order, `add(i, s, w)` for every destination `i` of a line of `len` whose
-    // source `s = i − shift` is on the line: each output sums its taps in the kernel's order on
-    // every axis, so the three axes give the same bits as one loop per voxel.
+    // For each tap in order, `add(range, shift, w)` with the destinations `i` of a line of `len`
+    // whose source `i − shift` is on the line: each output sums its taps in the kernel's order
+    // on every axis, so the passes give the same bits as one loop per voxel.
     let taps = |len: usize, add: &mut dyn FnMut(std::ops::Range<usize>, i64, f64)| {
         for (tap, &w) in kernel.iter().enumerate() {
             let shift = tap as i64 - radius;
