@@ -166,6 +166,14 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
             100.0 * lowered.least_factor,
         );
     }
+    let put_back = &built.figures.band_put_back;
+    if !put_back.is_empty() {
+        tracing::info!(
+            "{} atoms of a seam's band stay on the straight band from the sheet's cut to the seam \
+             (`band_put_back` lists them): on the medial points the boundary crossed itself there",
+            put_back.len()
+        );
+    }
     if let Some(wanted) = built.figures.voxel_wanted_mm {
         tracing::info!(
             "the thinnest wall asks for {wanted:.3} mm voxels; the grid is {:.3} mm to stay within \

@@ -212,8 +212,9 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
 }
 
 /// biv-me's template heart (a real two-ventricle myocardium, 1 mm): three sheets meeting along
-/// the RV insertion seam, built with default options into a sound template (decision 0402). Its
-/// voxel Dice, 0.917, is under the 0.95 of [`assert_targets`]: a regression guard at 0.9.
+/// the RV insertion seam, built with default options into a sound template (decisions 0402,
+/// 0406). Its voxel Dice, 0.927, is under the 0.95 of [`assert_targets`]: a regression guard at
+/// 0.92.
 #[test]
 fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam() {
     let dir = tempfile::tempdir().unwrap();
@@ -226,7 +227,8 @@ fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam() {
         figures["atoms_by_spokes"][2].as_u64().unwrap() >= 10,
         "{figures}"
     );
-    assert!(f(&figures["dice"]) >= 0.9, "{figures}");
+    assert!(f(&figures["dice"]) >= 0.92, "{figures}");
+    assert!(figures["band_put_back"].is_array(), "{figures}");
     assert!(f(&figures["max_spoke_normal_deg"]) <= 0.1, "{figures}");
     assert!(f(&figures["max_spoke_mismatch_pct"]) <= 0.1, "{figures}");
     for key in ["closed_manifold", "outward", "self_intersection_free"] {

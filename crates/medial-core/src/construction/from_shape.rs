@@ -22,7 +22,7 @@ use crate::construction::inflate::{inflate, self_intersections, MedialSheet};
 use crate::construction::project::{project, ProjectOptions};
 use crate::construction::skeleton::chart::ChartKind;
 use crate::construction::skeleton::{
-    medial_points, sheet_of_mask, Sampling, ShapeSheet, MIN_FEATURE_ANGLE_DEG,
+    medial_points, sheet_of_mask, Sampling, ShapeSheet, Subdivided, MIN_FEATURE_ANGLE_DEG,
 };
 use crate::fit::augmented_lagrangian::CoarseTime;
 use crate::fit::optimize::ProgressRule;
@@ -39,6 +39,7 @@ use crate::model::template::MAX_SPOKES;
 use crate::model::{MedialTemplate, Model, SpokeMetrics, TemplateSummary};
 use crate::{Error, Result, TriMesh, Vec3};
 use serde::Serialize;
+use std::collections::BTreeSet;
 
 /// Atoms of a template when neither a count nor a spacing is given.
 pub const DEFAULT_ATOMS: usize = 300;
@@ -240,6 +241,10 @@ pub struct TemplateFigures {
     pub final_projection_move_mm: f64,
     /// Where the radius was lowered because the boundary intersected itself.
     pub radius_lowered: RadiusLowered,
+    /// The atoms of a seam's band put back on the straight band the stitching made, because
+    /// their places on the medial points made the boundary intersect itself (before any
+    /// radius is lowered there).
+    pub band_put_back: Vec<usize>,
     /// The template's summary.
     pub summary: TemplateSummary,
 }
@@ -289,10 +294,12 @@ impl TemplateFigures {
 /// Builds the template of `shape` (see the module doc) within `memory`.
 ///
 /// Where the fitted template's boundary intersects itself (triangles that the flow carried
-/// across each other in a narrow wedge between sheets at a seam), the radius at the atoms of
-/// the triangles involved is lowered by [`SHRINK`] and the sheet inflated and fitted again, up
-/// to [`REFITS`] times: a start that can be made sound is not a failure. The figures say
-/// which atoms were lowered and by how much ([`RadiusLowered`]).
+/// across each other in a narrow wedge between sheets at a seam), the sheet is mended at the
+/// atoms of the triangles involved (a seam's band put back on its straight
+/// place, else the radius lowered by [`SHRINK`]) and inflated and fitted again, up to
+/// [`REFITS`] times: a start that can be made sound is not a failure. The figures say which
+/// atoms were put back ([`TemplateFigures::band_put_back`]) and which lowered and by how much
+/// ([`RadiusLowered`]).
 pub fn template_of_shape(
     shape: &Shape,
     options: &TemplateOptions,
@@ -302,21 +309,22 @@ pub fn template_of_shape(
     let (mask, voxel, wanted) = fine_mask(shape, options.voxel, memory)?;
     let found = sheet_of_mask(&mask, options.sampling)?;
     let subdivided = found.subdivided()?;
-    let mut fine = subdivided.clone();
+    let mut fine = subdivided.sheet.clone();
+    let mut put_back = BTreeSet::new();
     let mut refits = 0;
     loop {
         let (initial, inflated_sheet) =
-            inflated(fine).map_err(|e| match Fold::of(&found.sheet) {
-                Some(fold) => {
-                    Error::InvalidTemplate(format!(
+            inflated(fine, &subdivided, &mut put_back).map_err(|e| {
+                match Fold::of(&found.sheet) {
+                    Some(fold) => Error::InvalidTemplate(format!(
                 "the medial sheet folds by up to {:.0}° between neighbouring triangles at {} \
                  edges, the sharpest near ({:.1}, {:.1}, {:.1}) mm: the shape probably \
                  branches there (sheets meeting at a seam that was not found; {} seams \
                  found), and a folded sheet cannot be inflated ({e})",
                 fold.max_deg, fold.edges, fold.at.x, fold.at.y, fold.at.z, found.branching.seams
-            ))
+            )),
+                    None => e,
                 }
-                None => e,
             })?;
         let dice_before_fit = voxel_dice(&initial.boundary_mesh()?, &mask)?;
         let (fitted, fit_stopped_early) = if options.fit {
@@ -335,9 +343,11 @@ pub fn template_of_shape(
                 &mask,
                 [voxel, dice_before_fit, projection.max_displacement],
             )?;
+            let (placed, _) = subdivided.band_put_back(&subdivided.sheet, put_back.clone())?;
             let figures = TemplateFigures {
                 voxel_wanted_mm: wanted,
-                radius_lowered: RadiusLowered::between(&subdivided, &inflated_sheet, refits),
+                radius_lowered: RadiusLowered::between(&placed, &inflated_sheet, refits),
+                band_put_back: put_back.into_iter().collect(),
                 ..figures
             };
             return Ok(BuiltTemplate {
@@ -349,7 +359,13 @@ pub fn template_of_shape(
                 fit_stopped_early,
             });
         }
-        fine = lowered_where(&inflated_sheet, &template, &pairs)?;
+        fine = mended(
+            &inflated_sheet,
+            &template,
+            &pairs,
+            &subdivided,
+            &mut put_back,
+        )?;
         refits += 1;
     }
 }
@@ -390,20 +406,31 @@ impl RadiusLowered {
     }
 }
 
-/// `sheet` with the radius lowered by [`SHRINK`] at the atoms of the boundary triangles of
-/// `template` (inflated from it) in the intersecting pairs `pairs`.
-fn lowered_where(
+/// `sheet` (a subdivision of `subdivided` with its radii as lowered so far) mended at the
+/// atoms of the boundary triangles of `template` (inflated from it) in the intersecting pairs
+/// `pairs`: the atoms of a seam's band among them put back on the straight band the
+/// stitching made (their subdivided places, which the band's width was chosen for), recorded
+/// in `put_back`; where none is left to put back, the radius at those atoms lowered by
+/// [`SHRINK`].
+fn mended(
     sheet: &MedialSheet,
     template: &MedialTemplate,
     pairs: &[(usize, usize)],
+    subdivided: &Subdivided,
+    put_back: &mut BTreeSet<usize>,
 ) -> Result<MedialSheet> {
     let boundary = template.boundary_mesh()?;
     let atoms = template.medial_index();
-    let mut radius = sheet.radius().to_vec();
-    let involved: std::collections::BTreeSet<usize> = (pairs.iter())
+    let involved: BTreeSet<usize> = (pairs.iter())
         .flat_map(|&(a, b)| [a, b])
         .flat_map(|t| boundary.triangles()[t].map(|v| atoms[v]))
         .collect();
+    let (moved_sheet, moved) = subdivided.band_put_back(sheet, involved.iter().copied())?;
+    if !moved.is_empty() {
+        put_back.extend(moved);
+        return Ok(moved_sheet);
+    }
+    let mut radius = sheet.radius().to_vec();
     for m in involved {
         radius[m] *= SHRINK;
     }
@@ -533,10 +560,14 @@ impl Fold {
 /// it was inflated from. The inflation's boundary is free of self-intersections, but the
 /// projection moves spokes where sheets meet at a narrow angle at a seam (their spokes into
 /// the wedge between them end close together): where the projected boundary intersects
-/// itself, the radius is lowered there ([`lowered_where`]) and the sheet inflated and projected
+/// itself, the sheet is mended there ([`mended`]) and inflated and projected
 /// again, up to [`REFITS`] times (the fit to the shape restores the thickness; a boundary still
 /// intersecting is reported by the verdict).
-fn inflated(mut fine: MedialSheet) -> Result<(MedialTemplate, MedialSheet)> {
+fn inflated(
+    mut fine: MedialSheet,
+    subdivided: &Subdivided,
+    put_back: &mut BTreeSet<usize>,
+) -> Result<(MedialTemplate, MedialSheet)> {
     for round in 0..=REFITS {
         let inflated = inflate(&fine)?;
         let template = MedialTemplate::new(
@@ -549,7 +580,7 @@ fn inflated(mut fine: MedialSheet) -> Result<(MedialTemplate, MedialSheet)> {
         if pairs.is_empty() || round == REFITS {
             return Ok((projected, fine));
         }
-        fine = lowered_where(&fine, &projected, &pairs)?;
+        fine = mended(&fine, &projected, &pairs, subdivided, put_back)?;
     }
     unreachable!("the last round returns")
 }
@@ -687,6 +718,7 @@ fn figures_of(
         dice_before_fit,
         final_projection_move_mm: moved,
         radius_lowered: RadiusLowered::default(),
+        band_put_back: Vec::new(),
         summary,
     })
 }
@@ -811,6 +843,7 @@ mod tests {
             dice_before_fit: 0.0,
             final_projection_move_mm: 0.0,
             radius_lowered: RadiusLowered::default(),
+            band_put_back: Vec::new(),
             summary: TemplateSummary::default(),
         }
     }

@@ -144,15 +144,18 @@ impl ShapeSheet {
     /// coarse lattice of a curved thin wall that is more than the wall's half thickness (the
     /// biv-me heart's right ventricle: half its subdivided points left the wall), so the
     /// subdivision only gives the atoms' connectivity and regular spacing, and the medial
-    /// points their places. The band the stitching triangulated along each seam (the points
-    /// of the triangles with a corner on a seam, and the points subdivision puts between
-    /// them) stays as subdivided: its width was chosen for the subdivided band's points
-    /// ([`CUT_RADII`]), and the seams' points are polylines fitted to their own medial points.
+    /// points their places. That holds in the band the stitching triangulated along each seam
+    /// too (the points of the triangles with a corner on a seam, and the points subdivision
+    /// puts between them): there the zipper's triangles are straight chords from the cut to
+    /// the seam, across a wall that curves into its junction. The band's subdivided places are
+    /// kept beside ([`Subdivided::band`]): the band's width was chosen for them
+    /// ([`CUT_RADII`]), and they are where an atom goes back to where its place on the medial
+    /// points makes the boundary cross itself.
     ///
     /// Errors: those of [`MedialSheet::loop_subdivide`], of the fit (a point whose chart
     /// window holds too few medial points) and of [`MedialSheet::new`] (a triangle the new
     /// places make degenerate).
-    pub fn subdivided(&self) -> Result<MedialSheet> {
+    pub fn subdivided(&self) -> Result<Subdivided> {
         let subdivided = self.sheet.loop_subdivide()?;
         // The band: the points of the triangles with a corner on a seam.
         let mut off_band = self.sheet_of_point.clone();
@@ -161,16 +164,59 @@ impl ShapeSheet {
                 t.iter().for_each(|&v| off_band[v] = None);
             }
         }
-        let labels = self.sheet.subdivided_labels(&off_band);
+        let in_band = self.sheet.subdivided_labels(&off_band);
+        let labels = self.sheet.subdivided_labels(&self.sheet_of_point);
         let mut points = subdivided.points().to_vec();
         let mut radius = subdivided.radius().to_vec();
-        for ((p, r), label) in points.iter_mut().zip(&mut radius).zip(&labels) {
+        let mut band = vec![None; points.len()];
+        for (m, label) in labels.iter().enumerate() {
             if let Some(k) = *label {
+                if in_band[m].is_none() {
+                    band[m] = Some((points[m], radius[m]));
+                }
                 let (lattice, fit) = (&self.lattices[k], &self.fits[k]);
-                (*p, *r) = fit.at(lattice.chart.coords(p))?;
+                (points[m], radius[m]) = fit.at(lattice.chart.coords(&points[m]))?;
             }
         }
-        MedialSheet::new(points, subdivided.triangles().to_vec(), radius)
+        Ok(Subdivided {
+            sheet: MedialSheet::new(points, subdivided.triangles().to_vec(), radius)?,
+            band,
+        })
+    }
+}
+
+/// A shape's sheet after one subdivision, its atoms on the shape's medial points
+/// ([`ShapeSheet::subdivided`]).
+#[derive(Clone, Debug)]
+pub struct Subdivided {
+    /// The subdivided sheet.
+    pub sheet: MedialSheet,
+    /// For each atom of a seam's band, its place and radius as subdivided (on the straight
+    /// band the stitching triangulated); `None` off the bands and on the seams.
+    pub band: Vec<Option<(Vec3, f64)>>,
+}
+
+impl Subdivided {
+    /// `sheet` (this sheet with other radii, as inflation lowers them) with the band atoms
+    /// among `atoms` put back on their subdivided places, and those atoms; a band atom already
+    /// there, and an atom off the bands, is left.
+    pub fn band_put_back(
+        &self,
+        sheet: &MedialSheet,
+        atoms: impl IntoIterator<Item = usize>,
+    ) -> Result<(MedialSheet, Vec<usize>)> {
+        let (mut points, mut radius) = (sheet.points().to_vec(), sheet.radius().to_vec());
+        let mut moved = Vec::new();
+        for m in atoms {
+            if let Some((p, r)) = self.band[m] {
+                if points[m] != p {
+                    (points[m], radius[m]) = (p, r);
+                    moved.push(m);
+                }
+            }
+        }
+        let sheet = MedialSheet::new(points, sheet.triangles().to_vec(), radius)?;
+        Ok((sheet, moved))
     }
 }
 
