@@ -341,9 +341,9 @@ impl Grid {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
-    use crate::construction::from_shape::LEFT_OUT_LIMIT;
+    use crate::construction::skeleton::ridge::LEFT_OUT_LIMIT;
     use crate::construction::skeleton::seam::Seam;
     use crate::construction::skeleton::{medial_pieces, medial_points, MIN_FEATURE_ANGLE_DEG};
     use crate::image::Volume;
@@ -385,11 +385,11 @@ mod tests {
     /// insertions). With an RV wall of 1 or 2 mm (outer radius 17 or 18), or at 0.25 mm voxels,
     /// the RV's sheet is not kept: its medial points are cut off from the LV's where the RV wall
     /// widens into the LV's (decision 0402).
-    struct Ventricles;
+    pub(crate) struct Ventricles;
 
     impl Ventricles {
         const LV: [f64; 2] = [12.0, 20.0];
-        const RV: [f64; 2] = [16.0, 20.0];
+        pub(crate) const RV: [f64; 2] = [16.0, 20.0];
         const RV_CENTRE: [f64; 2] = [16.0, 0.0];
 
         fn rv(p: [f64; 2]) -> f64 {
@@ -499,8 +499,13 @@ mod tests {
         }
 
         /// The shape with the RV cavity of radius `rv_cavity` on a grid of voxel `v`.
-        fn mask_with(v: f64, rv_cavity: f64) -> Volume {
-            let lo = Vec3::new(-23.0, -23.0, -14.0);
+        pub(crate) fn mask_with(v: f64, rv_cavity: f64) -> Volume {
+            Self::mask_sampled(v, rv_cavity, Vec3::zeros())
+        }
+
+        /// [`Ventricles::mask_with`] with the voxel centres moved by `phase` voxels.
+        pub(crate) fn mask_sampled(v: f64, rv_cavity: f64, phase: Vec3) -> Volume {
+            let lo = Vec3::new(-23.0, -23.0, -14.0) + v * phase;
             mask(lo, Vec3::new(60.0, 46.0, 28.0), v, |p| {
                 Self::inside_with([p.x, p.y], rv_cavity) && p.z.abs() <= 12.0
             })
@@ -549,21 +554,26 @@ mod tests {
     }
 
     /// An RV free wall of 1.5 mm (three 0.5 mm voxels) tapers into the septum where its two
-    /// sides stop facing each other: its medial points do not reach the rest, and the share
-    /// of the shape left out says so (the 4 mm wall of the test above leaves nothing out).
+    /// sides stop facing each other: its medial points stop short of the rest, by less than the
+    /// junction's radius, and join it as a wall (decision 0407). A wall apart from the rest by
+    /// more than its radii (a plate beside the LV) is left out, and the share says so.
     #[test]
-    fn a_thin_wall_whose_medial_points_do_not_reach_the_rest_is_reported_left_out() {
-        let share = |rv_cavity: f64| {
-            let (_, left_out) = medial_pieces(
-                &Ventricles::mask_with(0.5, rv_cavity),
-                MIN_FEATURE_ANGLE_DEG,
-            )
-            .unwrap();
-            left_out
-        };
-        let (thick, thin) = (share(Ventricles::RV[0]), share(Ventricles::RV[1] - 1.5));
-        assert!(thick <= 0.01 * LEFT_OUT_LIMIT, "{thick}");
-        assert!(thin > LEFT_OUT_LIMIT, "{thin}");
+    fn a_thin_wall_joins_the_rest_across_its_taper_and_a_wall_apart_is_reported_left_out() {
+        let v = 0.5;
+        let share = |shape: &Volume| medial_pieces(shape, MIN_FEATURE_ANGLE_DEG).unwrap().1;
+        for rv_cavity in [Ventricles::RV[0], Ventricles::RV[1] - 1.5] {
+            let left_out = share(&Ventricles::mask_with(v, rv_cavity));
+            assert!(left_out <= 0.01 * LEFT_OUT_LIMIT, "{rv_cavity}: {left_out}");
+        }
+        // The LV wall and a plate 4 mm thick, 9 mm beyond it (radii 4 and 2 mm).
+        let lo = Vec3::new(-23.0, -23.0, -14.0);
+        let apart = mask(lo, Vec3::new(60.0, 46.0, 28.0), v, |p| {
+            let ring = (Ventricles::LV[0]..=Ventricles::LV[1]).contains(&p.x.hypot(p.y));
+            let plate = (29.0..=33.0).contains(&p.x) && p.y.abs() <= 15.0;
+            (ring || plate) && p.z.abs() <= 12.0
+        });
+        let left_out = share(&apart);
+        assert!(left_out > LEFT_OUT_LIMIT, "{left_out}");
     }
 
     #[test]

@@ -34,7 +34,11 @@ pub fn medial_points(mask: &Volume, min_angle_deg: f64) -> Result<Vec<MedialPoin
 /// point stands for about a voxel face of sheet, so this is about its share of the shape's
 /// volume). Small pieces are islands of boundary noise; a large one is a wall whose medial
 /// points do not reach the rest, e.g. a thin wall joined to a thick one where the two sides
-/// stop facing each other, which the sheet built from the largest piece leaves out.
+/// stop facing each other, which the sheet built from the largest piece leaves out. Two
+/// points closer than the smaller of their radii ([`JOIN_RADII`]) are in one piece; two pieces
+/// each holding more than [`LEFT_OUT_LIMIT`] of the shape (walls) join where two of their
+/// points are closer than the larger radius, a gap the wide-angle rule leaves where a thin
+/// wall widens into a thick one.
 ///
 /// For every pair of face-neighbouring inside voxels `x, y` with nearest background voxels
 /// `f_x, f_y`, the midpoint `m = (x + y)/2` is a medial point when the feature vectors
@@ -141,11 +145,28 @@ fn check_border(inside: &[bool], dims: [usize; 3]) -> Result<()> {
 /// at 1, each centre lies in the other's inscribed ball, one part of the shape.
 pub const JOIN_RADII: f64 = 1.0;
 
+/// The largest share of the shape (by the medial points' summed radii, about area ×
+/// thickness) that a piece of its medial points left out of the sheet may hold in a template
+/// that meets its targets: islands of boundary noise and corners hold far less; a piece of a
+/// twentieth of the shape is a wall whose medial points do not reach the rest (a thin wall
+/// tapering into a thick one). Two such pieces also join by the larger of two points' radii,
+/// not only the smaller ([`medial_pieces`]).
+pub const LEFT_OUT_LIMIT: f64 = 0.05;
+
 /// Joins (in `uf`, over the cells `cell_of` of `points`) the pieces with two points closer than
 /// [`JOIN_RADII`] times the smaller of their radii: a gap in the ridge at the scale of the
 /// wall, not of the voxel. Near where a thin wall meets a thick one its radius grows fast, the
 /// wide-angle rule drops a short stretch of points (about a millimetre on a 4 mm wall), and a
 /// join of a voxel or two bridged it on a coarse grid and not on a fine one.
+///
+/// Two pieces each holding more than [`LEFT_OUT_LIMIT`] of the shape are walls, not noise, and
+/// join where a point of one lies within the inscribed ball of a point of the other (closer
+/// than the larger radius; the segment between them is inside that ball, inside the shape). Where a thin
+/// wall widens into a thick one, the stretch the wide-angle rule drops reaches up to the thick
+/// wall's radius, which the thin wall's own does not span on a coarse grid (a two-ventricle
+/// shape on 1 mm voxels: a gap of 3.2 mm between radii of 2.2 and 4.3 mm). A smaller piece
+/// joins anything by the smaller radius only: an island of boundary noise joined by the larger
+/// would be a spur (on the same shape sampled half a voxel over, one made it two sheets).
 fn join_at_their_scale(points: &[MedialPoint], cell_of: &[usize], uf: &mut UnionFind) {
     let reach = JOIN_RADII * points.iter().map(|p| p.radius).fold(0.0, f64::max);
     if reach.is_nan() || reach <= 0.0 {
@@ -161,9 +182,11 @@ fn join_at_their_scale(points: &[MedialPoint], cell_of: &[usize], uf: &mut Union
     }
     // Only points off the largest piece can join anything: the search runs from them.
     let root: Vec<usize> = cell_of.iter().map(|&c| uf.find(c)).collect();
-    let Some((largest, _)) = largest_of(points, &root) else {
+    let Some((largest, size)) = largest_of(points, &root) else {
         return;
     };
+    let whole: f64 = points.iter().map(|p| p.radius).sum();
+    let wall = |i: usize| size[&root[i]] > LEFT_OUT_LIMIT * whole;
     let off: Vec<usize> = (0..points.len()).filter(|&i| root[i] != largest).collect();
     // The pairs of join cells with two points near enough (the union is order-free, so the
     // parallel search gives the same pieces).
@@ -182,7 +205,13 @@ fn join_at_their_scale(points: &[MedialPoint], cell_of: &[usize], uf: &mut Union
                     if root[i] == root[j] || found.contains(&(a, b)) {
                         continue;
                     }
-                    let near = JOIN_RADII * points[i].radius.min(points[j].radius);
+                    let (ri, rj) = (points[i].radius, points[j].radius);
+                    let near = JOIN_RADII
+                        * if wall(i) && wall(j) {
+                            ri.max(rj)
+                        } else {
+                            ri.min(rj)
+                        };
                     if (points[i].position - points[j].position).norm() <= near {
                         found.insert((a, b));
                     }
