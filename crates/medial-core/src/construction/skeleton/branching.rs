@@ -576,6 +576,18 @@ pub(crate) mod tests {
         assert!(left_out > LEFT_OUT_LIMIT, "{left_out}");
     }
 
+    /// The 1.5 mm RV free wall joined across its taper: the points bridging the gap make its
+    /// junctions with the LV seams (decision 0407; joined without them, the walls touch and no
+    /// seam is found).
+    #[test]
+    fn a_thin_wall_joined_across_its_taper_meets_the_rest_at_two_seams() {
+        let v = 0.5;
+        let shape = Ventricles::mask_with(v, Ventricles::RV[1] - 1.5);
+        let points = medial_points(&shape, MIN_FEATURE_ANGLE_DEG).unwrap();
+        let counts = branching(&points, v).counts;
+        assert_eq!((counts.sheets, counts.seams), (3, 2), "{counts:?}");
+    }
+
     #[test]
     fn the_seam_of_a_t_of_thick_walls_lies_at_its_junction_within_a_voxel() {
         // The ball tangent to the bar's far face (y = −h) and to the two inner corners

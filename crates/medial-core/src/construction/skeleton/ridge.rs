@@ -91,7 +91,7 @@ pub fn medial_pieces(mask: &Volume, min_angle_deg: f64) -> Result<(Vec<MedialPoi
             })
         })
         .collect();
-    let (points, left_out) = largest_piece(points, 1.5 * h);
+    let (points, left_out) = largest_piece(points, h);
     if points.is_empty() {
         return Err(Error::InvalidVolume(
             "the shape has no medial points: it is empty or thinner than two voxels everywhere"
@@ -161,16 +161,25 @@ pub const LEFT_OUT_LIMIT: f64 = 0.05;
 ///
 /// Two pieces each holding more than [`LEFT_OUT_LIMIT`] of the shape are walls, not noise, and
 /// join where a point of one lies within the inscribed ball of a point of the other (closer
-/// than the larger radius; the segment between them is inside that ball, inside the shape). Where a thin
-/// wall widens into a thick one, the stretch the wide-angle rule drops reaches up to the thick
-/// wall's radius, which the thin wall's own does not span on a coarse grid (a two-ventricle
-/// shape on 1 mm voxels: a gap of 3.2 mm between radii of 2.2 and 4.3 mm). A smaller piece
-/// joins anything by the smaller radius only: an island of boundary noise joined by the larger
-/// would be a spur (on the same shape sampled half a voxel over, one made it two sheets).
-fn join_at_their_scale(points: &[MedialPoint], cell_of: &[usize], uf: &mut UnionFind) {
+/// than the larger radius; the segment between them is inside that ball, inside the shape).
+/// Where a thin wall widens into a thick one, the stretch the wide-angle rule drops reaches up
+/// to the thick wall's radius, which the thin wall's own does not span on a coarse grid (a
+/// two-ventricle shape on 1 mm voxels: a gap of 3.2 mm between radii of 2.2 and 4.3 mm). A
+/// smaller piece joins anything by the smaller radius only: an island of boundary noise joined
+/// by the larger would be a spur (on the same shape sampled half a voxel over, one made it two
+/// sheets).
+///
+/// Returns the bridges across the gaps only the larger radius spans: where two walls stay
+/// apart by the smaller radius, each point of one that the larger joins to the other, with the
+/// nearest such point of the other ([`bridged`] fills the segment between them with points).
+fn join_at_their_scale(
+    points: &[MedialPoint],
+    cell_of: &[usize],
+    uf: &mut UnionFind,
+) -> Vec<(usize, usize)> {
     let reach = JOIN_RADII * points.iter().map(|p| p.radius).fold(0.0, f64::max);
     if reach.is_nan() || reach <= 0.0 {
-        return;
+        return Vec::new();
     }
     let key = |p: &Vec3| {
         let k = p.map(|c| (c / reach).floor() as i64);
@@ -183,46 +192,93 @@ fn join_at_their_scale(points: &[MedialPoint], cell_of: &[usize], uf: &mut Union
     // Only points off the largest piece can join anything: the search runs from them.
     let root: Vec<usize> = cell_of.iter().map(|&c| uf.find(c)).collect();
     let Some((largest, size)) = largest_of(points, &root) else {
-        return;
+        return Vec::new();
     };
     let whole: f64 = points.iter().map(|p| p.radius).sum();
     let wall = |i: usize| size[&root[i]] > LEFT_OUT_LIMIT * whole;
     let off: Vec<usize> = (0..points.len()).filter(|&i| root[i] != largest).collect();
-    // The pairs of join cells with two points near enough (the union is order-free, so the
-    // parallel search gives the same pieces).
-    let links: Vec<(usize, usize)> = off
+    // Per point off the largest piece: the pairs of join cells with two points within the
+    // smaller radius, those of two walls within the larger only, and the nearest point of
+    // another wall within the larger radius only (the union is order-free, so the parallel
+    // search gives the same pieces).
+    let found: Vec<Joins> = off
         .par_iter()
-        .flat_map_iter(|&i| {
+        .map(|&i| {
             let k = key(&points[i].position);
-            let mut found: HashSet<(usize, usize)> = HashSet::new();
+            let mut joins = Joins::default();
             for d in 0..27 {
                 let o = [d % 3, (d / 3) % 3, d / 9].map(|o| o as i64 - 1);
                 let Some(others) = grid.get(&[k[0] + o[0], k[1] + o[1], k[2] + o[2]]) else {
                     continue;
                 };
                 for &j in others {
-                    let (a, b) = (cell_of[i], cell_of[j]);
-                    if root[i] == root[j] || found.contains(&(a, b)) {
+                    if root[i] == root[j] {
                         continue;
                     }
                     let (ri, rj) = (points[i].radius, points[j].radius);
-                    let near = JOIN_RADII
-                        * if wall(i) && wall(j) {
-                            ri.max(rj)
-                        } else {
-                            ri.min(rj)
-                        };
-                    if (points[i].position - points[j].position).norm() <= near {
-                        found.insert((a, b));
+                    let d = (points[i].position - points[j].position).norm();
+                    let cells = (cell_of[i], cell_of[j]);
+                    if d <= JOIN_RADII * ri.min(rj) {
+                        joins.near.insert(cells);
+                    } else if wall(i) && wall(j) && d <= JOIN_RADII * ri.max(rj) {
+                        joins.walls.insert(cells);
+                        if joins.bridge.map_or(true, |(_, e)| d < e) {
+                            joins.bridge = Some((j, d));
+                        }
                     }
                 }
             }
-            found.into_iter()
+            joins
         })
         .collect();
-    for (a, b) in links {
-        uf.union(a, b);
+    for joins in &found {
+        joins.near.iter().for_each(|&(a, b)| uf.union(a, b));
     }
+    let bridges = (off.iter().zip(&found))
+        .filter_map(|(&i, joins)| joins.bridge.map(|(j, _)| (i, j)))
+        .filter(|&(i, j)| uf.find(cell_of[i]) != uf.find(cell_of[j]))
+        .collect();
+    for joins in &found {
+        joins.walls.iter().for_each(|&(a, b)| uf.union(a, b));
+    }
+    bridges
+}
+
+/// What a point off the largest piece joins ([`join_at_their_scale`]).
+#[derive(Default)]
+struct Joins {
+    /// Pairs of cells with two points within the smaller of their radii.
+    near: HashSet<(usize, usize)>,
+    /// Pairs of cells of two walls with two points within the larger radius only.
+    walls: HashSet<(usize, usize)>,
+    /// The nearest point of another wall within the larger radius only, and its distance.
+    bridge: Option<(usize, f64)>,
+}
+
+/// Points about every `step` mm along the segments `bridges` (pairs of indices into
+/// `points`), the radius linear between the ends', each with its segment's first end: the
+/// medial points of the stretch where a thin wall widens into a thick one, which the
+/// wide-angle rule dropped. Without them the walls joined there meet without a junction, and
+/// no seam is seen where they meet.
+fn bridged(
+    points: &[MedialPoint],
+    bridges: &[(usize, usize)],
+    step: f64,
+) -> Vec<(usize, MedialPoint)> {
+    (bridges.iter())
+        .flat_map(|&(i, j)| {
+            let (a, b) = (points[i], points[j]);
+            let n = ((b.position - a.position).norm() / step).floor() as usize;
+            (1..n).map(move |s| {
+                let t = s as f64 / n as f64;
+                let point = MedialPoint {
+                    position: a.position + t * (b.position - a.position),
+                    radius: a.radius + t * (b.radius - a.radius),
+                };
+                (i, point)
+            })
+        })
+        .collect()
 }
 
 /// The piece (root) of the largest total radius `Σ r` over `points` whose pieces are `root`
@@ -239,11 +295,13 @@ fn largest_of(points: &[MedialPoint], root: &[usize]) -> Option<(usize, HashMap<
 }
 
 /// The points of the largest piece by total radius `Σ r` (so that thin spurs weigh little), two
-/// points being joined when their cells of size `cell` touch (26-neighbourhood) or when they
-/// are closer than the smaller of their radii ([`join_at_their_scale`]); ties to the
-/// piece with the smallest root. Drops the islands that boundary noise and corners make, and
-/// says what share of the whole `Σ r` the largest of them held (0 with one piece).
-fn largest_piece(points: Vec<MedialPoint>, cell: f64) -> (Vec<MedialPoint>, f64) {
+/// points being joined when their cells of 1.5 voxels (`voxel`, mm) touch (26-neighbourhood)
+/// or when they are closer than the smaller of their radii, or the larger between walls
+/// ([`join_at_their_scale`], whose bridges add points a voxel apart); ties to the piece with
+/// the smallest root. Drops the islands that boundary noise and corners make, and says what
+/// share of the whole `Σ r` the largest of them held (0 with one piece).
+fn largest_piece(points: Vec<MedialPoint>, voxel: f64) -> (Vec<MedialPoint>, f64) {
+    let cell = 1.5 * voxel;
     let key = |p: &Vec3| p.map(|c| (c / cell).floor() as i64);
     let mut cells: HashMap<[i64; 3], usize> = HashMap::new();
     let mut cell_of = Vec::with_capacity(points.len());
@@ -262,8 +320,13 @@ fn largest_piece(points: Vec<MedialPoint>, cell: f64) -> (Vec<MedialPoint>, f64)
             }
         }
     }
-    join_at_their_scale(&points, &cell_of, &mut uf);
-    let root: Vec<usize> = cell_of.iter().map(|&c| uf.find(c)).collect();
+    let bridges = join_at_their_scale(&points, &cell_of, &mut uf);
+    let bridge_points = bridged(&points, &bridges, voxel);
+    let cells_of_bridges = bridge_points.iter().map(|&(i, _)| cell_of[i]);
+    let all_cells: Vec<usize> = cell_of.iter().copied().chain(cells_of_bridges).collect();
+    let root: Vec<usize> = all_cells.iter().map(|&c| uf.find(c)).collect();
+    let mut points = points;
+    points.extend(bridge_points.into_iter().map(|(_, p)| p));
     let Some((best, size)) = largest_of(&points, &root) else {
         return (points, 0.0);
     };
