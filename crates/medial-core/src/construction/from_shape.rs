@@ -339,7 +339,8 @@ pub fn template_of_shape(
                 &mask,
                 [voxel, dice_before_fit, projection.max_displacement],
             )?;
-            let (placed, _) = subdivided.band_put_back(&subdivided.sheet, put_back.clone())?;
+            let (placed, _) =
+                subdivided.band_put_back(&subdivided.sheet, put_back.iter().copied())?;
             let figures = TemplateFigures {
                 voxel_wanted_mm: wanted,
                 radius_lowered: RadiusLowered::between(&placed, &inflated_sheet, refits),
