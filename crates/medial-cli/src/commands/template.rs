@@ -166,6 +166,14 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
             100.0 * lowered.least_factor,
         );
     }
+    if let Some(again) = &built.figures.sampled_again {
+        tracing::warn!(
+            "the template from {} was unsound ({}); built again from twice as many atoms \
+             (`sampled_again`)",
+            again.first,
+            again.why
+        );
+    }
     let put_back = &built.figures.band_put_back;
     if !put_back.is_empty() {
         tracing::info!(

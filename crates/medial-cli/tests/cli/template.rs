@@ -159,11 +159,12 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
             .map(|k| figures["atoms_by_spokes"][k].as_u64().unwrap())
             .collect();
         assert!(by_spokes.iter().all(|&n| n > 0), "{by_spokes:?}");
-        // About the default 300 atoms (252 from the mask and the mesh, 349 from the target:
-        // the sheets' lattices have whole rings).
+        // About the default 300 atoms (278 from the mask, 382 from the mesh, 324 from the
+        // target since decision 0408: the sheets' lattices have whole rings, and three
+        // samplings at most are tried to come nearer).
         let atoms = figures["atoms"].as_u64().unwrap();
         assert!(
-            (240..=375).contains(&atoms),
+            (240..=400).contains(&atoms),
             "{name}: {atoms} atoms for 300"
         );
         // The template file: its seam atoms have three spokes, as many as the figures say.
@@ -213,27 +214,61 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
 
 /// biv-me's template heart (a real two-ventricle myocardium, 1 mm): three sheets meeting along
 /// the RV insertion seam, built with default options into a sound template (decisions 0402,
-/// 0406). Its voxel Dice, 0.927, is under the 0.95 of [`assert_targets`]: a regression guard at
-/// 0.92.
+/// 0406, 0408), as given and moved by a fraction of a voxel (a stand-in for the same heart
+/// segmented on another grid: before decision 0408 that move found no seam). As given, the
+/// template from 300 atoms crosses itself after the fit and is built again from 600 (voxel
+/// Dice 0.943); the move builds at 300 (0.930). Both under the 0.95 of [`assert_targets`]:
+/// a regression guard at 0.925.
 #[test]
-fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam() {
+fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam_wherever_its_voxels_fall() {
     let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("heart.vtk");
     let heart = data("bivme/template_myocardium.nii.gz");
-    let figures = run_json(&["template", s(&heart), "--out", s(&out), "-q"]);
-    let counts = (figures["sheets"].as_u64(), figures["seams"].as_u64());
-    assert_eq!(counts, (Some(3), Some(1)), "{figures}");
-    assert!(
-        figures["atoms_by_spokes"][2].as_u64().unwrap() >= 10,
-        "{figures}"
-    );
-    assert!(f(&figures["dice"]) >= 0.92, "{figures}");
-    assert!(figures["band_put_back"].is_array(), "{figures}");
-    assert!(f(&figures["max_spoke_normal_deg"]) <= 0.1, "{figures}");
-    assert!(f(&figures["max_spoke_mismatch_pct"]) <= 0.1, "{figures}");
-    for key in ["closed_manifold", "outward", "self_intersection_free"] {
-        assert_eq!(figures[key], Value::Bool(true), "{key}: {figures}");
+    for (k, by) in [[0.0; 3], [0.1, 0.4, 0.9]].into_iter().enumerate() {
+        let shape = if k == 0 {
+            heart.clone()
+        } else {
+            let moved = dir.path().join(format!("moved{k}.nii.gz"));
+            write_nifti(
+                &moved,
+                &moved_by(&read_nifti(&heart).unwrap(), by),
+                NiftiType::U8,
+            )
+            .unwrap();
+            moved
+        };
+        let out = dir.path().join(format!("heart{k}.vtk"));
+        let figures = run_json(&["template", s(&shape), "--out", s(&out), "-q"]);
+        let counts = (figures["sheets"].as_u64(), figures["seams"].as_u64());
+        assert_eq!(counts, (Some(3), Some(1)), "moved by {by:?}: {figures}");
+        assert!(
+            figures["atoms_by_spokes"][2].as_u64().unwrap() >= 10,
+            "{figures}"
+        );
+        assert!(f(&figures["dice"]) >= 0.925, "moved by {by:?}: {figures}");
+        assert!(f(&figures["max_spoke_normal_deg"]) <= 0.1, "{figures}");
+        assert!(f(&figures["max_spoke_mismatch_pct"]) <= 0.1, "{figures}");
+        for key in ["closed_manifold", "outward", "self_intersection_free"] {
+            assert_eq!(figures[key], Value::Bool(true), "{key}: {figures}");
+        }
     }
+}
+
+/// The segmentation `mask` moved by `by` voxels on its own grid (two voxels wider each side):
+/// its foreground interpolated trilinearly and cut at one half.
+fn moved_by(mask: &Volume, by: [f64; 3]) -> Volume {
+    let [nx, ny, nz] = mask.dims();
+    let dims = [nx + 4, ny + 4, nz + 4];
+    let shift =
+        |d: [f64; 3]| mask.voxel_to_world() * nalgebra::Matrix4::new_translation(&Vec3::from(d));
+    let sampled = (mask.foreground(None))
+        .resampled(dims, shift(by.map(|b| -2.0 - b)))
+        .unwrap();
+    let data = sampled
+        .data()
+        .iter()
+        .map(|&v| f64::from(u8::from(v > 0.5)))
+        .collect();
+    Volume::new(dims, data, shift([-2.0; 3])).unwrap()
 }
 
 /// The distances (mm) from `points` to the nearest point of `sheet` (its triangles), ascending.

@@ -241,6 +241,9 @@ pub struct TemplateFigures {
     /// their places on the medial points made the boundary intersect itself (before any
     /// radius is lowered there).
     pub band_put_back: Vec<usize>,
+    /// Why the template was built again from a sheet sampled twice as finely, when the
+    /// sampling asked for gave an unsound template that the finer one mends.
+    pub sampled_again: Option<SampledAgain>,
     /// The template's summary.
     pub summary: TemplateSummary,
 }
@@ -296,6 +299,12 @@ impl TemplateFigures {
 /// [`REFITS`] times: a start that can be made sound is not a failure. The figures say which
 /// atoms were put back ([`TemplateFigures::band_put_back`]) and which lowered and by how much
 /// ([`RadiusLowered`]).
+///
+/// A template that is still unsound (its boundary crossing itself, or a sheet that cannot be
+/// inflated) is built once more from the sheet sampled twice as finely ([`Sampling::finer`]):
+/// atoms far apart for the shape's walls and junctions are a fixable start. The finer template
+/// is kept when it is sound (the figures' [`TemplateFigures::sampled_again`] say why), else
+/// the first outcome is returned.
 pub fn template_of_shape(
     shape: &Shape,
     options: &TemplateOptions,
@@ -303,7 +312,80 @@ pub fn template_of_shape(
 ) -> Result<BuiltTemplate> {
     shape.bounds()?;
     let (mask, voxel, wanted) = fine_mask(shape, options.voxel, memory)?;
-    let found = sheet_of_mask(&mask, options.sampling)?;
+    let build = |sampling: Sampling| {
+        let options = TemplateOptions {
+            sampling,
+            ..*options
+        };
+        built_at(shape, &mask, (voxel, wanted), &options, memory)
+    };
+    let first = build(options.sampling);
+    let why = match &first {
+        Ok(built) => match built.figures.verdict() {
+            Err(Verdict::Unsound(causes)) => causes.join(", "),
+            _ => return first.map(|built| built.with(mask)),
+        },
+        Err(Error::InvalidTemplate(e)) => e.clone(),
+        Err(_) => return first.map(|built| built.with(mask)),
+    };
+    let again = match build(options.sampling.finer()) {
+        Ok(mut built) if built.figures.verdict().is_ok() => {
+            built.figures.sampled_again = Some(SampledAgain {
+                first: options.sampling.to_string(),
+                why,
+            });
+            Ok(built)
+        }
+        _ => first,
+    };
+    again.map(|built| built.with(mask))
+}
+
+/// Why a template was built again from a finer sampling of its sheet
+/// ([`template_of_shape`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SampledAgain {
+    /// The sampling first asked for.
+    pub first: String,
+    /// What was wrong with the template built from it.
+    pub why: String,
+}
+
+/// A template built at one sampling ([`built_at`]), its shape's mask kept by the caller.
+struct Attempt {
+    template: MedialTemplate,
+    found: ShapeSheet,
+    figures: TemplateFigures,
+    fit_stopped_early: Option<String>,
+    atom_sheet: Vec<Option<usize>>,
+}
+
+impl Attempt {
+    /// The built template, with the mask it was built from.
+    fn with(self, mask: Volume) -> BuiltTemplate {
+        BuiltTemplate {
+            template: self.template,
+            found: self.found,
+            mask,
+            figures: self.figures,
+            fit_stopped_early: self.fit_stopped_early,
+            atom_sheet: self.atom_sheet,
+        }
+    }
+}
+
+/// [`template_of_shape`] at one sampling: the sheet of `mask` (the shape on the grid of voxel
+/// `voxel`, mm; `wanted` the voxel the thinnest wall asked for, where coarser) at
+/// `options.sampling`, subdivided, inflated, fitted to the shape (`options.fit`), projected,
+/// and mended where its boundary intersects itself.
+fn built_at(
+    shape: &Shape,
+    mask: &Volume,
+    (voxel, wanted): (f64, Option<f64>),
+    options: &TemplateOptions,
+    memory: MemoryLimit,
+) -> Result<Attempt> {
+    let found = sheet_of_mask(mask, options.sampling)?;
     let subdivided = found.subdivided()?;
     let mut fine = subdivided.sheet.clone();
     let mut put_back = BTreeSet::new();
@@ -322,9 +404,9 @@ pub fn template_of_shape(
                     None => e,
                 }
             })?;
-        let dice_before_fit = voxel_dice(&initial.boundary_mesh()?, &mask)?;
+        let dice_before_fit = voxel_dice(&initial.boundary_mesh()?, mask)?;
         let (fitted, fit_stopped_early) = if options.fit {
-            fit_to_shape(&initial, &mask, memory)?
+            fit_to_shape(&initial, mask, memory)?
         } else {
             (initial, None)
         };
@@ -336,7 +418,7 @@ pub fn template_of_shape(
                 &template,
                 &found,
                 shape,
-                &mask,
+                mask,
                 [voxel, dice_before_fit, projection.max_displacement],
             )?;
             let (placed, _) =
@@ -347,11 +429,10 @@ pub fn template_of_shape(
                 band_put_back: put_back.into_iter().collect(),
                 ..figures
             };
-            return Ok(BuiltTemplate {
+            return Ok(Attempt {
                 atom_sheet: found.sheet.subdivided_labels(&found.sheet_of_point),
                 template,
                 found,
-                mask,
                 figures,
                 fit_stopped_early,
             });
@@ -716,6 +797,7 @@ fn figures_of(
         final_projection_move_mm: moved,
         radius_lowered: RadiusLowered::default(),
         band_put_back: Vec::new(),
+        sampled_again: None,
         summary,
     })
 }
@@ -841,6 +923,7 @@ mod tests {
             final_projection_move_mm: 0.0,
             radius_lowered: RadiusLowered::default(),
             band_put_back: Vec::new(),
+            sampled_again: None,
             summary: TemplateSummary::default(),
         }
     }

@@ -7,6 +7,7 @@ use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
 
 use super::ridge::MedialPoint;
+use super::seam::arc_of_points;
 use crate::construction::inflate::UnionFind;
 use crate::Vec3;
 
@@ -85,10 +86,87 @@ impl Branches {
 /// 4. The points left out of the pieces near a seam, and those of lines of non-flat points
 ///    that are not seams, go to the sheet of the nearest point of a piece within twice the
 ///    widest ball.
+/// 5. A seam line that two pieces reach, curved round so that its ends are nearer each other
+///    than a quarter of its length, is closed across the gap between its ends for step 2 (the
+///    segment between them, sampled a voxel apart, with the balls of its ends): where the
+///    sheet it encloses then parts from the sheet round it, three pieces reach it and it is a
+///    seam. A ventricle's insertion lines go round the septum and fade where the RV cavity
+///    tapers to its apex; whether the balls of their two ends just overlap across the gap
+///    there (and part the septum from the LV free wall) depends on where the voxels fall
+///    (decision 0408). The bridge only parts the pieces: the seam is its own points.
 pub fn branching(points: &[MedialPoint], voxel: f64) -> Branches {
-    let ball: Vec<f64> = (points.iter())
-        .map(|p| (BALL_VOXELS * voxel).max(BALL_RADII * p.radius))
+    let open = branches_bridged(points, voxel, &[]);
+    let bridges: Vec<(Vec3, f64)> = (open.two_sided.iter())
+        .flat_map(|seam| gap_bridge(points, seam, voxel))
         .collect();
+    if !bridges.is_empty() {
+        let closed = branches_bridged(points, voxel, &bridges);
+        if closed.branches.counts.seams > open.branches.counts.seams {
+            return closed.branches;
+        }
+    }
+    open.branches
+}
+
+/// A seam's ends are bridged ([`branching`], step 5) when they are nearer each other than this
+/// fraction of its length: the seam goes round at least four fifths of the outline of the
+/// sheet it encloses.
+const GAP_OF_LENGTH: f64 = 0.25;
+
+/// What [`branches_bridged`] found.
+struct Bridged {
+    branches: Branches,
+    /// The points of each line of non-flat points that exactly two pieces reach.
+    two_sided: Vec<Vec<usize>>,
+}
+
+/// Points a voxel apart, each with the ball of the seam's end it is nearer by interpolation,
+/// across the gap between the ends of the seam of points `seam` of `points` (their arc
+/// parameter's least and greatest), when the gap is shorter than [`GAP_OF_LENGTH`] of the
+/// seam's length; none otherwise. An end's ball is the mean over the points within a bin
+/// (two voxels) of it along the seam.
+fn gap_bridge(points: &[MedialPoint], seam: &[usize], voxel: f64) -> Vec<(Vec3, f64)> {
+    let on_seam: Vec<MedialPoint> = seam.iter().map(|&i| points[i]).collect();
+    let positions: Vec<Vec3> = on_seam.iter().map(|p| p.position).collect();
+    let arcs = arc_of_points(&on_seam, voxel);
+    let (lo, hi) = (arcs.iter()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &a| {
+        (lo.min(a), hi.max(a))
+    });
+    let end = |at: f64| {
+        let near: Vec<usize> = (0..seam.len())
+            .filter(|&k| (arcs[k] - at).abs() <= 2.0 * voxel)
+            .collect();
+        let n = near.len().max(1) as f64;
+        let centre = near.iter().map(|&k| positions[k]).sum::<Vec3>() / n;
+        let ball = (near.iter())
+            .map(|&k| ball_of(&points[seam[k]], voxel))
+            .sum::<f64>()
+            / n;
+        (centre, ball)
+    };
+    let ((a, ball_a), (b, ball_b)) = (end(lo), end(hi));
+    let gap = (b - a).norm();
+    if gap >= GAP_OF_LENGTH * (hi - lo) {
+        return Vec::new();
+    }
+    let steps = (gap / voxel).ceil().max(1.0) as usize;
+    (0..=steps)
+        .map(|k| {
+            let t = k as f64 / steps as f64;
+            (a + t * (b - a), ball_a + t * (ball_b - ball_a))
+        })
+        .collect()
+}
+
+/// The ball about a medial point whose points decide whether it is on a seam (mm).
+pub(super) fn ball_of(p: &MedialPoint, voxel: f64) -> f64 {
+    (BALL_VOXELS * voxel).max(BALL_RADII * p.radius)
+}
+
+/// [`branching`]'s steps 1–4, with `bridges` (positions and balls) among the seam points when
+/// the points are parted into pieces.
+fn branches_bridged(points: &[MedialPoint], voxel: f64, bridges: &[(Vec3, f64)]) -> Bridged {
+    let ball: Vec<f64> = points.iter().map(|p| ball_of(p, voxel)).collect();
     let widest = ball.iter().copied().fold(0.0, f64::max);
     let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
     let grid = Grid::new(&positions, widest);
@@ -100,13 +178,17 @@ pub fn branching(points: &[MedialPoint], voxel: f64) -> Branches {
         })
         .collect();
     let seam_points: Vec<usize> = (0..positions.len()).filter(|&i| on_seam[i]).collect();
-    let seam_positions: Vec<Vec3> = seam_points.iter().map(|&i| positions[i]).collect();
-    let seam_ball: Vec<f64> = seam_points.iter().map(|&i| ball[i]).collect();
+    let seam_positions: Vec<Vec3> = (seam_points.iter().map(|&i| positions[i]))
+        .chain(bridges.iter().map(|b| b.0))
+        .collect();
+    let seam_ball: Vec<f64> = (seam_points.iter().map(|&i| ball[i]))
+        .chain(bridges.iter().map(|b| b.1))
+        .collect();
     let seam_grid = Grid::new(&seam_positions, 2.0 * widest);
     // Seam points within the smaller of their balls are one seam: a seam's points, thinned
     // where it crosses the voxels obliquely, stay one.
     let seam_piece = {
-        let mut uf = UnionFind::new(seam_points.len());
+        let mut uf = UnionFind::new(seam_positions.len());
         for (k, p) in seam_positions.iter().enumerate() {
             for j in seam_grid.within(&seam_positions, *p, seam_ball[k]) {
                 if (seam_positions[j] - p).norm() <= seam_ball[j] {
@@ -114,7 +196,7 @@ pub fn branching(points: &[MedialPoint], voxel: f64) -> Branches {
                 }
             }
         }
-        (0..seam_points.len())
+        (0..seam_positions.len())
             .map(|k| uf.find(k))
             .collect::<Vec<_>>()
     };
@@ -180,14 +262,27 @@ pub fn branching(points: &[MedialPoint], voxel: f64) -> Branches {
         let (lo, hi, balls, n) = span[&seam];
         (hi - lo).norm() > 2.0 * balls / n as f64
     };
+    let mut two_sided = Vec::new();
     for (&seam, pieces) in &reach {
         let pieces: Vec<usize> = pieces.iter().map(|&p| slot(p)).collect();
         if pieces.len() >= 3 && a_line(seam) {
             seam_numbers.push(seam);
         } else if let [a, b] = pieces[..] {
             sheets.union(a, b);
+            if a_line(seam) {
+                two_sided.push(seam);
+            }
         }
     }
+    two_sided.sort_unstable();
+    let two_sided = (two_sided.iter())
+        .map(|&s| {
+            (seam_points.iter().enumerate())
+                .filter(|&(k, _)| seam_piece[k] == s)
+                .map(|(_, &i)| i)
+                .collect()
+        })
+        .collect();
     seam_numbers.sort_unstable();
     let roots: Vec<usize> = (0..kept.len()).map(|k| sheets.find(k)).collect();
     let mut distinct = roots.clone();
@@ -213,7 +308,7 @@ pub fn branching(points: &[MedialPoint], voxel: f64) -> Branches {
         seam[i] = seam_numbers.binary_search(&seam_piece[k]).ok();
     }
     assign_to_nearest_sheet(&positions, &mut sheet, &seam, 2.0 * widest);
-    Branches {
+    let branches = Branches {
         counts: Branching {
             sheets: distinct.len(),
             seams: seam_numbers.len(),
@@ -222,6 +317,10 @@ pub fn branching(points: &[MedialPoint], voxel: f64) -> Branches {
         sheet,
         seam,
         seam_sheets,
+    };
+    Bridged {
+        branches,
+        two_sided,
     }
 }
 

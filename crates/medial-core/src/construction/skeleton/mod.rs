@@ -68,6 +68,25 @@ pub enum Sampling {
     Spacing(f64),
 }
 
+impl Sampling {
+    /// Twice as many atoms: the count doubled, or the spacing divided by √2.
+    pub fn finer(self) -> Self {
+        match self {
+            Self::Atoms(n) => Self::Atoms(n.saturating_mul(2)),
+            Self::Spacing(s) => Self::Spacing(s / std::f64::consts::SQRT_2),
+        }
+    }
+}
+
+impl std::fmt::Display for Sampling {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Atoms(n) => write!(f, "{n} atoms"),
+            Self::Spacing(s) => write!(f, "atoms {s} mm apart"),
+        }
+    }
+}
+
 /// The cell of the chart's region grid ([`Region`]), in voxels: at least one medial point per
 /// cell on a sheet crossing the grid (a ridge has a point per voxel column through it).
 const CELL_VOXELS: f64 = 2.0;

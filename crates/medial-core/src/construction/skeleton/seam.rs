@@ -2,8 +2,10 @@
 //! vertex: the seam's medial points ordered along their principal direction, averaged in bins,
 //! smoothed and resampled evenly by arc length.
 
+use super::branching::ball_of;
 use super::ridge::MedialPoint;
 use super::MIN_FEATURE_ANGLE_DEG;
+use crate::construction::inflate::UnionFind;
 use crate::{Error, Result, Vec3};
 
 /// Length of the bins along the seam's principal direction, voxels.
@@ -38,9 +40,8 @@ impl Seam {
     ///
     /// Errors: `InvalidVolume` when fewer than two bins are left.
     pub fn fit(points: &[MedialPoint], voxel: f64) -> Result<Self> {
-        let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
         let bin = BIN_VOXELS * voxel;
-        let along: Vec<i64> = (arc_of_points(&positions, voxel).iter())
+        let along: Vec<i64> = (arc_of_points(points, voxel).iter())
             .map(|t| (t / bin).floor() as i64)
             .collect();
         let lo = along.iter().copied().min().unwrap_or(0);
@@ -207,39 +208,63 @@ impl Seam {
 }
 
 /// How far apart two points of a seam may be to be joined along it, voxels: the first of
-/// these that joins all its points ([`arc_of_points`]).
+/// these at which every piece but the largest is a scrap ([`arc_of_points`]).
 const LINKS_VOXELS: [f64; 5] = [2.0, 4.0, 8.0, 16.0, 32.0];
 
-/// The arc parameter of each of a seam's points `positions` (mm, on a mask of mean voxel
-/// `voxel`): the arc length of its nearest point on the seam's spine, the shortest path
-/// between its two ends over the graph joining points at most a link apart (the first of
-/// `LINKS_VOXELS` that joins them all, or the piece of the first point at the widest), the
-/// ends being the point farthest from the first point and the point farthest from that one.
-/// Along a line of points, straight or curved, it grows as the arc length, where a projection
-/// onto one direction folds a curved line over itself.
-pub fn arc_of_points(positions: &[Vec3], voxel: f64) -> Vec<f64> {
+/// The arc parameter of each of a seam's points `points` (mm, on a mask of mean voxel
+/// `voxel`): the arc length of its nearest point on the seam's spine. The spine is the
+/// shortest path between the two ends of the largest piece of the graph joining points at most
+/// a link apart, the ends being its point farthest from its first point and its point
+/// farthest from that one; the link is the first of `LINKS_VOXELS` at which every other piece
+/// is a scrap (the widest when none is): fewer points than the seam holds along one seam ball
+/// (`n·b̄/L`, `b̄` the points' mean ball, `L` the spine's length), too few to be a stretch of
+/// the seam to follow. Along a line of points, straight or curved, the parameter grows as the
+/// arc length, where a projection onto one direction folds a curved line over itself; and a
+/// seam curved round until its ends nearly meet (a ventricle's insertion lines round the
+/// septum) is followed round from one end to the other, where a link wide enough to join its
+/// scraps also joins its ends and the spine would be half the loop (decision 0408).
+pub fn arc_of_points(points: &[MedialPoint], voxel: f64) -> Vec<f64> {
+    let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
     if positions.len() < 2 {
         return vec![0.0; positions.len()];
     }
+    let n = positions.len();
+    let mean_ball = points.iter().map(|p| ball_of(p, voxel)).sum::<f64>() / n as f64;
     let mut spine = Vec::new();
     for link in LINKS_VOXELS.map(|l| l * voxel) {
-        let neighbours = neighbours_within(positions, link);
+        let neighbours = neighbours_within(&positions, link);
+        let mut pieces = UnionFind::new(n);
+        for (i, near) in neighbours.iter().enumerate() {
+            near.iter().for_each(|&(j, _)| pieces.union(i, j));
+        }
+        let piece: Vec<usize> = (0..n).map(|i| pieces.find(i)).collect();
+        let mut size = vec![0usize; n];
+        piece.iter().for_each(|&p| size[p] += 1);
+        let largest = (0..n)
+            .max_by_key(|&p| (size[p], std::cmp::Reverse(p)))
+            .unwrap_or(0);
+        let first = piece.iter().position(|&p| p == largest).unwrap_or(0);
         let farthest = |from: &[f64]| {
-            (0..positions.len())
+            (0..n)
                 .filter(|&i| from[i].is_finite())
                 .max_by(|&a, &b| from[a].total_cmp(&from[b]))
-                .unwrap_or(0)
+                .unwrap_or(first)
         };
-        let (from_first, _) = shortest_paths(&neighbours, 0);
+        let (from_first, _) = shortest_paths(&neighbours, first);
         let start = farthest(&from_first);
         let (from_start, previous) = shortest_paths(&neighbours, start);
         let mut at = farthest(&from_start);
+        let length = from_start[at];
         spine = vec![positions[at]];
         while at != start {
             at = previous[at];
             spine.push(positions[at]);
         }
-        if from_start.iter().all(|d| d.is_finite()) {
+        let per_ball = n as f64 * mean_ball / length.max(mean_ball);
+        let scraps_only = (0..n)
+            .filter(|&p| p != largest && size[p] > 0)
+            .all(|p| (size[p] as f64) < per_ball);
+        if scraps_only {
             break;
         }
     }
@@ -325,6 +350,52 @@ fn shortest_paths(neighbours: &[Vec<(usize, f64)>], source: usize) -> (Vec<f64>,
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_seam_curved_round_until_its_ends_nearly_meet_is_followed_round_past_its_scraps() {
+        // The voxels (0.5 mm) within 0.6 mm of a circle of radius 10 mm in z = 0, less a gap
+        // of 15.5° (its ends 1.5 mm apart, three voxels: a link of four voxels joins them),
+        // and a scrap of three points 1.5 mm outside it, which no link of two voxels joins.
+        let (v, radius, gap) = (0.5, 10.0, 15.5_f64.to_radians());
+        let tau = std::f64::consts::TAU;
+        let mut points = Vec::new();
+        for i in -24..=24 {
+            for j in -24..=24 {
+                for k in -2..=2 {
+                    let p = Vec3::new(i as f64, j as f64, k as f64) * v;
+                    let angle = p.y.atan2(p.x).rem_euclid(tau);
+                    let on = angle.clamp(gap / 2.0, tau - gap / 2.0);
+                    let nearest = radius * Vec3::new(on.cos(), on.sin(), 0.0);
+                    if (p - nearest).norm() <= 0.6 {
+                        points.push(MedialPoint {
+                            position: p,
+                            radius: 1.0,
+                        });
+                    }
+                }
+            }
+        }
+        points.extend((0..3).map(|k| MedialPoint {
+            position: Vec3::new(-12.1 - 0.5 * k as f64, 0.0, 0.0),
+            radius: 1.0,
+        }));
+        let arcs = arc_of_points(&points, v);
+        let (lo, hi) = (arcs.iter()).fold((f64::INFINITY, 0.0_f64), |(lo, hi), &a| {
+            (lo.min(a), hi.max(a))
+        });
+        let length = radius * (tau - gap);
+        assert!(hi - lo > 0.9 * length, "{} of {length} mm", hi - lo);
+        // The arc parameter grows with the angle round the circle, one way or the other.
+        let mut by_angle: Vec<(f64, f64)> = (points.iter().zip(&arcs))
+            .filter(|(p, _)| p.position.norm() < 11.0)
+            .map(|(p, &a)| (p.position.y.atan2(p.position.x).rem_euclid(tau), a))
+            .collect();
+        by_angle.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let sign = (by_angle[by_angle.len() - 1].1 - by_angle[0].1).signum();
+        for w in by_angle.windows(2) {
+            assert!(sign * (w[1].1 - w[0].1) > -1.5, "{w:?}");
+        }
+    }
 
     #[test]
     fn a_noisy_line_of_points_gives_its_line_resampled_evenly() {
