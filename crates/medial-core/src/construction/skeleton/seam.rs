@@ -7,6 +7,7 @@ use super::ridge::MedialPoint;
 use super::MIN_FEATURE_ANGLE_DEG;
 use crate::construction::inflate::UnionFind;
 use crate::{Error, Result, Vec3};
+use nalgebra::Matrix3;
 
 /// Length of the bins along the seam's principal direction, voxels.
 const BIN_VOXELS: f64 = 2.0;
@@ -222,12 +223,101 @@ const LINKS_VOXELS: [f64; 5] = [2.0, 4.0, 8.0, 16.0, 32.0];
 /// arc length, where a projection onto one direction folds a curved line over itself; and a
 /// seam curved round until its ends nearly meet (a ventricle's insertion lines round the
 /// septum) is followed round from one end to the other, where a link wide enough to join its
-/// scraps also joins its ends and the spine would be half the loop (decision 0408).
+/// scraps also joins its ends and the spine would be half the loop (decision 0408). A seam
+/// whose points close into a loop is opened first ([`opened`]).
 pub fn arc_of_points(points: &[MedialPoint], voxel: f64) -> Vec<f64> {
     let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
     if positions.len() < 2 {
         return vec![0.0; positions.len()];
     }
+    let spine = spine_of(points, voxel);
+    let spine = match opened(points, &spine, voxel) {
+        Some(open) => spine_of(&open, voxel),
+        None => spine,
+    };
+    // The path zigzags through the points across the seam: smoothed as the bins are.
+    let n = spine.len();
+    let points = smoothed_across(&spine);
+    let seam = Seam {
+        radius: vec![0.0; n],
+        points,
+    };
+    positions.iter().map(|p| seam.arc_of(p)).collect()
+}
+
+/// A seam's points close into a loop when more than this many seam balls' worth of them
+/// (`n·b̄/L` each, as for a scrap) lie further than a ball from their spine: the spine of a
+/// loop runs between two of its points half way round from each other and covers half of it.
+const LOOP_BALLS: f64 = 2.0;
+
+/// Sectors about a closed seam's centre in its principal plane, of which the one of least mean
+/// radius is left out to open it ([`opened`]): 15°, about two seam balls of a ventricle's
+/// insertion loop (250 mm, balls of 5–6 mm).
+const LOOP_SECTORS: usize = 24;
+
+/// The seam's points `points` less the sector of [`LOOP_SECTORS`] about their centre (in
+/// their principal plane) where their mean radius is least, when they close into a loop round
+/// their spine `spine` ([`LOOP_BALLS`]); `None` when they do not. A seam is where three sheets
+/// meet, and its ball is smallest where the junction fades: the two ventricles' insertion
+/// lines meet round the RV's apex, where the RV cavity tapers to nothing and the three walls
+/// become one; on a segmentation rotated against its voxels the junction is found all the
+/// way round (decision 0408), and the seam, which the stitching needs with two ends, is
+/// opened there.
+fn opened(points: &[MedialPoint], spine: &[Vec3], voxel: f64) -> Option<Vec<MedialPoint>> {
+    let n = points.len();
+    let mean_ball = points.iter().map(|p| ball_of(p, voxel)).sum::<f64>() / n as f64;
+    let probe = Seam {
+        radius: vec![0.0; spine.len()],
+        points: smoothed_across(spine),
+    };
+    let per_ball = n as f64 * mean_ball / probe.length().max(mean_ball);
+    let far = (points.iter())
+        .filter(|p| probe.distance(&p.position) > mean_ball)
+        .count();
+    if (far as f64) <= LOOP_BALLS * per_ball {
+        return None;
+    }
+    let centre = points.iter().map(|p| p.position).sum::<Vec3>() / n as f64;
+    let spread: Matrix3<f64> = (points.iter())
+        .map(|p| (p.position - centre) * (p.position - centre).transpose())
+        .sum();
+    let eigen = spread.symmetric_eigen();
+    let mut axes = [0, 1, 2];
+    axes.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
+    let (u, v) = (
+        eigen.eigenvectors.column(axes[0]),
+        eigen.eigenvectors.column(axes[1]),
+    );
+    let tau = std::f64::consts::TAU;
+    let sector = |p: &MedialPoint| {
+        let d = p.position - centre;
+        let angle = d.dot(&v).atan2(d.dot(&u)).rem_euclid(tau);
+        ((angle / tau * LOOP_SECTORS as f64) as usize).min(LOOP_SECTORS - 1)
+    };
+    let mut sums = [(0.0, 0usize); LOOP_SECTORS];
+    for p in points {
+        let s = &mut sums[sector(p)];
+        s.0 += p.radius;
+        s.1 += 1;
+    }
+    let weakest = (0..LOOP_SECTORS)
+        .filter(|&k| sums[k].1 > 0)
+        .min_by(|&a, &b| {
+            let mean = |k: usize| sums[k].0 / sums[k].1 as f64;
+            mean(a).total_cmp(&mean(b))
+        })?;
+    let open: Vec<MedialPoint> = points
+        .iter()
+        .filter(|p| sector(p) != weakest)
+        .copied()
+        .collect();
+    (open.len() >= 2).then_some(open)
+}
+
+/// The spine of `points` (see [`arc_of_points`]): the shortest path between the two ends of
+/// their largest piece, its points in order.
+fn spine_of(points: &[MedialPoint], voxel: f64) -> Vec<Vec3> {
+    let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
     let n = positions.len();
     let mean_ball = points.iter().map(|p| ball_of(p, voxel)).sum::<f64>() / n as f64;
     let mut spine = Vec::new();
@@ -268,14 +358,7 @@ pub fn arc_of_points(points: &[MedialPoint], voxel: f64) -> Vec<f64> {
             break;
         }
     }
-    // The path zigzags through the points across the seam: smoothed as the bins are.
-    let n = spine.len();
-    let points = smoothed_across(&spine);
-    let seam = Seam {
-        radius: vec![0.0; n],
-        points,
-    };
-    positions.iter().map(|p| seam.arc_of(p)).collect()
+    spine
 }
 
 /// The polyline `points` smoothed across itself: each vertex moved to the mean of the
@@ -350,6 +433,42 @@ fn shortest_paths(neighbours: &[Vec<(usize, f64)>], source: usize) -> (Vec<f64>,
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_seam_closed_into_a_loop_is_opened_where_its_radius_is_least() {
+        // The voxels (0.5 mm) within 0.6 mm of a whole circle of radius 20 mm in z = 0, their
+        // radius 5 mm but 2 mm from 100° to 125° (a junction fading where the walls become one).
+        let (v, big) = (0.5, 20.0);
+        let tau = std::f64::consts::TAU;
+        let mut points = Vec::new();
+        for i in -44..=44 {
+            for j in -44..=44 {
+                for k in -2..=2 {
+                    let p = Vec3::new(i as f64, j as f64, k as f64) * v;
+                    if (p.xy().norm() - big).hypot(p.z) <= 0.6 {
+                        let degrees = p.y.atan2(p.x).rem_euclid(tau).to_degrees();
+                        let thin = (100.0..125.0).contains(&degrees);
+                        points.push(MedialPoint {
+                            position: p,
+                            radius: if thin { 2.0 } else { 5.0 },
+                        });
+                    }
+                }
+            }
+        }
+        let arcs = arc_of_points(&points, v);
+        let (lo, hi) = (arcs.iter()).fold((f64::INFINITY, 0.0_f64), |(lo, hi), &a| {
+            (lo.min(a), hi.max(a))
+        });
+        // Followed round all but the sector left out (half the loop without opening it).
+        assert!(hi - lo > 0.8 * tau * big, "{} mm", hi - lo);
+        // The thin stretch is where the loop was opened: its points lie at the seam's ends.
+        for (p, a) in points.iter().zip(&arcs) {
+            if p.radius < 3.0 {
+                assert!((a - lo).min(hi - a) < 0.2 * tau * big / 4.0, "{p:?} at {a}");
+            }
+        }
+    }
 
     #[test]
     fn a_seam_curved_round_until_its_ends_nearly_meet_is_followed_round_past_its_scraps() {
