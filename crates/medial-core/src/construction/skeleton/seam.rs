@@ -224,7 +224,7 @@ const LINKS_VOXELS: [f64; 5] = [2.0, 4.0, 8.0, 16.0, 32.0];
 /// seam curved round until its ends nearly meet (a ventricle's insertion lines round the
 /// septum) is followed round from one end to the other, where a link wide enough to join its
 /// scraps also joins its ends and the spine would be half the loop (decision 0408). A seam
-/// whose points close into a loop is opened first ([`opened`]).
+/// whose points close into a loop is opened first, where its radius is least (decision 0408).
 pub fn arc_of_points(points: &[MedialPoint], voxel: f64) -> Vec<f64> {
     let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
     if positions.len() < 2 {
