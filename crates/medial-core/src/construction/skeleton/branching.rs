@@ -95,12 +95,13 @@ impl Branches {
 ///    there (and part the septum from the LV free wall) depends on where the voxels fall
 ///    (decision 0408). The bridge only parts the pieces: the seam is its own points.
 pub fn branching(points: &[MedialPoint], voxel: f64) -> Branches {
-    let open = branches_bridged(points, voxel, &[]);
+    let non_flat = NonFlat::new(points, voxel);
+    let open = branches_bridged(&non_flat, voxel, &[]);
     let bridges: Vec<(Vec3, f64)> = (open.two_sided.iter())
         .flat_map(|seam| gap_bridge(points, seam, voxel))
         .collect();
     if !bridges.is_empty() {
-        let closed = branches_bridged(points, voxel, &bridges);
+        let closed = branches_bridged(&non_flat, voxel, &bridges);
         if closed.branches.counts.seams > open.branches.counts.seams {
             return closed.branches;
         }
@@ -163,21 +164,50 @@ pub(super) fn ball_of(p: &MedialPoint, voxel: f64) -> f64 {
     (BALL_VOXELS * voxel).max(BALL_RADII * p.radius)
 }
 
-/// [`branching`]'s steps 1–4, with `bridges` (positions and balls) among the seam points when
-/// the points are parted into pieces.
-fn branches_bridged(points: &[MedialPoint], voxel: f64, bridges: &[(Vec3, f64)]) -> Bridged {
-    let ball: Vec<f64> = points.iter().map(|p| ball_of(p, voxel)).collect();
-    let widest = ball.iter().copied().fold(0.0, f64::max);
-    let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
-    let grid = Grid::new(&positions, widest);
-    let on_seam: Vec<bool> = (0..positions.len())
-        .into_par_iter()
-        .map(|i| {
-            let near = grid.within(&positions, positions[i], ball[i]);
-            near.len() >= MIN_BALL_POINTS && !flat(&positions, &near)
-        })
-        .collect();
-    let seam_points: Vec<usize> = (0..positions.len()).filter(|&i| on_seam[i]).collect();
+/// [`branching`]'s step 1: the points about which the cloud is not flat.
+struct NonFlat {
+    positions: Vec<Vec3>,
+    /// Each point's seam ball (mm, [`ball_of`]).
+    ball: Vec<f64>,
+    /// The widest ball.
+    widest: f64,
+    /// The points on seams, ascending.
+    seam_points: Vec<usize>,
+}
+
+impl NonFlat {
+    fn new(points: &[MedialPoint], voxel: f64) -> Self {
+        let ball: Vec<f64> = points.iter().map(|p| ball_of(p, voxel)).collect();
+        let widest = ball.iter().copied().fold(0.0, f64::max);
+        let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
+        let grid = Grid::new(&positions, widest);
+        let on_seam: Vec<bool> = (0..positions.len())
+            .into_par_iter()
+            .map(|i| {
+                let near = grid.within(&positions, positions[i], ball[i]);
+                near.len() >= MIN_BALL_POINTS && !flat(&positions, &near)
+            })
+            .collect();
+        let seam_points = (0..positions.len()).filter(|&i| on_seam[i]).collect();
+        Self {
+            positions,
+            ball,
+            widest,
+            seam_points,
+        }
+    }
+}
+
+/// [`branching`]'s steps 2–4 from its step 1 `non_flat`, with `bridges` (positions and balls)
+/// among the seam points when the points are parted into pieces.
+fn branches_bridged(non_flat: &NonFlat, voxel: f64, bridges: &[(Vec3, f64)]) -> Bridged {
+    let NonFlat {
+        positions,
+        ball,
+        widest,
+        seam_points,
+    } = non_flat;
+    let widest = *widest;
     let seam_positions: Vec<Vec3> = (seam_points.iter().map(|&i| positions[i]))
         .chain(bridges.iter().map(|b| b.0))
         .collect();
@@ -307,7 +337,7 @@ fn branches_bridged(points: &[MedialPoint], voxel: f64, bridges: &[(Vec3, f64)])
     for (k, &i) in seam_points.iter().enumerate() {
         seam[i] = seam_numbers.binary_search(&seam_piece[k]).ok();
     }
-    assign_to_nearest_sheet(&positions, &mut sheet, &seam, 2.0 * widest);
+    assign_to_nearest_sheet(positions, &mut sheet, &seam, 2.0 * widest);
     let branches = Branches {
         counts: Branching {
             sheets: distinct.len(),

@@ -434,28 +434,31 @@ fn shortest_paths(neighbours: &[Vec<(usize, f64)>], source: usize) -> (Vec<f64>,
 mod tests {
     use super::*;
 
+    /// The centres of the voxels of side `v` (mm) in `|x|, |y| ≤ half·v`, `|z| ≤ 2v`.
+    fn voxels(v: f64, half: i32) -> Vec<Vec3> {
+        let range = |n: i32| (-n..=n).map(f64::from);
+        (range(half).flat_map(|i| range(half).flat_map(move |j| range(2).map(move |k| (i, j, k)))))
+            .map(|(i, j, k)| Vec3::new(i, j, k) * v)
+            .collect()
+    }
+
     #[test]
     fn a_seam_closed_into_a_loop_is_opened_where_its_radius_is_least() {
         // The voxels (0.5 mm) within 0.6 mm of a whole circle of radius 20 mm in z = 0, their
         // radius 5 mm but 2 mm from 100° to 125° (a junction fading where the walls become one).
         let (v, big) = (0.5, 20.0);
         let tau = std::f64::consts::TAU;
-        let mut points = Vec::new();
-        for i in -44..=44 {
-            for j in -44..=44 {
-                for k in -2..=2 {
-                    let p = Vec3::new(i as f64, j as f64, k as f64) * v;
-                    if (p.xy().norm() - big).hypot(p.z) <= 0.6 {
-                        let degrees = p.y.atan2(p.x).rem_euclid(tau).to_degrees();
-                        let thin = (100.0..125.0).contains(&degrees);
-                        points.push(MedialPoint {
-                            position: p,
-                            radius: if thin { 2.0 } else { 5.0 },
-                        });
-                    }
+        let points: Vec<MedialPoint> = (voxels(v, 44).into_iter())
+            .filter(|p| (p.xy().norm() - big).hypot(p.z) <= 0.6)
+            .map(|p| {
+                let degrees = p.y.atan2(p.x).rem_euclid(tau).to_degrees();
+                let thin = (100.0..125.0).contains(&degrees);
+                MedialPoint {
+                    position: p,
+                    radius: if thin { 2.0 } else { 5.0 },
                 }
-            }
-        }
+            })
+            .collect();
         let arcs = arc_of_points(&points, v);
         let (lo, hi) = (arcs.iter()).fold((f64::INFINITY, 0.0_f64), |(lo, hi), &a| {
             (lo.min(a), hi.max(a))
@@ -477,23 +480,17 @@ mod tests {
         // and a scrap of three points 1.5 mm outside it, which no link of two voxels joins.
         let (v, radius, gap) = (0.5, 10.0, 15.5_f64.to_radians());
         let tau = std::f64::consts::TAU;
-        let mut points = Vec::new();
-        for i in -24..=24 {
-            for j in -24..=24 {
-                for k in -2..=2 {
-                    let p = Vec3::new(i as f64, j as f64, k as f64) * v;
-                    let angle = p.y.atan2(p.x).rem_euclid(tau);
-                    let on = angle.clamp(gap / 2.0, tau - gap / 2.0);
-                    let nearest = radius * Vec3::new(on.cos(), on.sin(), 0.0);
-                    if (p - nearest).norm() <= 0.6 {
-                        points.push(MedialPoint {
-                            position: p,
-                            radius: 1.0,
-                        });
-                    }
-                }
-            }
-        }
+        let mut points: Vec<MedialPoint> = (voxels(v, 24).into_iter())
+            .filter(|p| {
+                let angle = p.y.atan2(p.x).rem_euclid(tau);
+                let on = angle.clamp(gap / 2.0, tau - gap / 2.0);
+                (p - radius * Vec3::new(on.cos(), on.sin(), 0.0)).norm() <= 0.6
+            })
+            .map(|position| MedialPoint {
+                position,
+                radius: 1.0,
+            })
+            .collect();
         points.extend((0..3).map(|k| MedialPoint {
             position: Vec3::new(-12.1 - 0.5 * k as f64, 0.0, 0.0),
             radius: 1.0,
