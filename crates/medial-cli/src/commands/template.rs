@@ -166,12 +166,22 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
             100.0 * lowered.least_factor,
         );
     }
+    let shortened = &built.figures.spokes_shortened;
+    if !shortened.atoms.is_empty() {
+        tracing::warn!(
+            "the spokes of {} atoms were shortened after the last fit (to {:.0} % at least; \
+             `spokes_shortened` lists them) where the boundary still intersected itself",
+            shortened.atoms.len(),
+            100.0 * shortened.least_factor,
+        );
+    }
     if let Some(again) = &built.figures.sampled_again {
         tracing::warn!(
-            "the template from {} was unsound ({}); built again from twice as many atoms \
+            "the template from {} fell short ({}); the one built again from {} is kept \
              (`sampled_again`)",
             again.first,
-            again.why
+            again.why,
+            again.kept
         );
     }
     let put_back = &built.figures.band_put_back;

@@ -215,10 +215,10 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
 /// biv-me's template heart (a real two-ventricle myocardium, 1 mm): three sheets meeting along
 /// the RV insertion seam, built with default options into a sound template (decisions 0402,
 /// 0406, 0408), as given and moved by a fraction of a voxel (a stand-in for the same heart
-/// segmented on another grid: before decision 0408 that move found no seam). As given, the
-/// template from 300 atoms crosses itself after the fit and is built again from 600 (voxel
-/// Dice 0.943); the move builds at 300 (0.930). Both under the 0.95 of [`assert_targets`]:
-/// a regression guard at 0.925.
+/// segmented on another grid: before decision 0408 that move found no seam). Both are built
+/// again from 600 atoms (decision 0409): as given, the template from 300 crosses itself after
+/// the fit (voxel Dice 0.943 from 600); moved, it is sound but below the 0.95 target (0.930
+/// from 300). Both under the 0.95 of [`assert_targets`]: guarded at the 0.93.
 #[test]
 fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam_wherever_its_voxels_fall() {
     let dir = tempfile::tempdir().unwrap();
@@ -244,7 +244,8 @@ fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam_wherever_its_voxels
             figures["atoms_by_spokes"][2].as_u64().unwrap() >= 10,
             "{figures}"
         );
-        assert!(f(&figures["dice"]) >= 0.925, "moved by {by:?}: {figures}");
+        assert!(f(&figures["dice"]) >= 0.93, "moved by {by:?}: {figures}");
+        assert!(figures["sampled_again"].is_object(), "{figures}");
         assert!(f(&figures["max_spoke_normal_deg"]) <= 0.1, "{figures}");
         assert!(f(&figures["max_spoke_mismatch_pct"]) <= 0.1, "{figures}");
         for key in ["closed_manifold", "outward", "self_intersection_free"] {

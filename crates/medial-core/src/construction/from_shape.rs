@@ -237,12 +237,16 @@ pub struct TemplateFigures {
     pub final_projection_move_mm: f64,
     /// Where the radius was lowered because the boundary intersected itself.
     pub radius_lowered: RadiusLowered,
+    /// Where the spokes of the finished template were shortened in place because its boundary
+    /// still crossed itself after the refits ([`SHORTENINGS`]).
+    pub spokes_shortened: SpokesShortened,
     /// The atoms of a seam's band put back on the straight band the stitching made, because
     /// their places on the medial points made the boundary intersect itself (before any
     /// radius is lowered there).
     pub band_put_back: Vec<usize>,
     /// Why the template was built again from a sheet sampled twice as finely, when the
-    /// sampling asked for gave an unsound template that the finer one mends.
+    /// sampling asked for gave a template unsound or below [`TARGET_DICE`] that the finer one
+    /// mends or betters.
     pub sampled_again: Option<SampledAgain>,
     /// The template's summary.
     pub summary: TemplateSummary,
@@ -298,13 +302,17 @@ impl TemplateFigures {
 /// place, else the radius lowered by [`SHRINK`]) and inflated and fitted again, up to
 /// [`REFITS`] times: a start that can be made sound is not a failure. The figures say which
 /// atoms were put back ([`TemplateFigures::band_put_back`]) and which lowered and by how much
-/// ([`RadiusLowered`]).
+/// ([`RadiusLowered`]). Where it still crosses itself after the last fit, which restores the
+/// thickness a mending before it took away, the spokes there are shortened in place, up to
+/// [`SHORTENINGS`] times while the crossings become fewer ([`SpokesShortened`]).
 ///
 /// A template that is still unsound (its boundary crossing itself, or a sheet that cannot be
-/// inflated) is built once more from the sheet sampled twice as finely ([`Sampling::finer`]):
-/// atoms far apart for the shape's walls and junctions are a fixable start. The finer template
-/// is kept when it is sound (the figures' [`TemplateFigures::sampled_again`] say why), else
-/// the first outcome is returned.
+/// inflated), or sound but below [`TARGET_DICE`] against its shape, is built again from the
+/// sheet sampled twice as finely ([`Sampling::finer`]), up to [`DOUBLINGS`] times until one is
+/// sound: atoms far apart for the shape's walls and junctions are a fixable start, and a
+/// lattice of whole rings can give a sheet fewer atoms than asked. The first sound finer
+/// template is kept when the first was unsound or it matches the shape better (the figures'
+/// [`TemplateFigures::sampled_again`] say why), else the first outcome is returned.
 pub fn template_of_shape(
     shape: &Shape,
     options: &TemplateOptions,
@@ -320,26 +328,46 @@ pub fn template_of_shape(
         built_at(shape, &mask, (voxel, wanted), &options, memory)
     };
     let first = build(options.sampling);
-    let why = match &first {
+    // What twice the atoms may mend, and the Dice to beat where the first template is sound.
+    let (why, to_beat) = match &first {
         Ok(built) => match built.figures.verdict() {
-            Err(Verdict::Unsound(causes)) => causes.join(", "),
+            Err(Verdict::Unsound(causes)) => (causes.join(", "), None),
+            Ok(()) if built.figures.dice < TARGET_DICE => (
+                format!(
+                    "voxel Dice {:.3} against the shape, below the target {TARGET_DICE}",
+                    built.figures.dice
+                ),
+                Some(built.figures.dice),
+            ),
             _ => return first.map(|built| built.with(mask)),
         },
-        Err(Error::InvalidTemplate(e)) => e.clone(),
+        Err(Error::InvalidTemplate(e)) => (e.clone(), None),
         Err(_) => return first.map(|built| built.with(mask)),
     };
-    let again = match build(options.sampling.finer()) {
-        Ok(mut built) if built.figures.verdict().is_ok() => {
-            built.figures.sampled_again = Some(SampledAgain {
-                first: options.sampling.to_string(),
-                why,
-            });
-            Ok(built)
+    // Finer until one is sound: kept if it betters a sound first.
+    let mut sampling = options.sampling;
+    for _ in 0..DOUBLINGS {
+        sampling = sampling.finer();
+        if let Ok(mut built) = build(sampling) {
+            if built.figures.verdict().is_ok() {
+                if to_beat.map_or(true, |dice| built.figures.dice > dice) {
+                    built.figures.sampled_again = Some(SampledAgain {
+                        first: options.sampling.to_string(),
+                        kept: sampling.to_string(),
+                        why,
+                    });
+                    return Ok(built.with(mask));
+                }
+                break;
+            }
         }
-        _ => first,
-    };
-    again.map(|built| built.with(mask))
+    }
+    first.map(|built| built.with(mask))
 }
+
+/// How many times at most a template is built again, each time from twice the atoms of the
+/// last ([`template_of_shape`]): up to 4× the atoms asked for, a lattice twice as fine.
+pub const DOUBLINGS: usize = 2;
 
 /// Why a template was built again from a finer sampling of its sheet
 /// ([`template_of_shape`]).
@@ -347,7 +375,9 @@ pub fn template_of_shape(
 pub struct SampledAgain {
     /// The sampling first asked for.
     pub first: String,
-    /// What was wrong with the template built from it.
+    /// The sampling of the template kept.
+    pub kept: String,
+    /// What was wrong with the template built from the first.
     pub why: String,
 }
 
@@ -414,18 +444,28 @@ fn built_at(
         let template = projection.template;
         let pairs = self_intersections(&template.boundary_mesh()?);
         if pairs.is_empty() || !options.fit || refits == REFITS {
+            let (template, shortened, moved) = if options.fit {
+                shortened_in_place(template, pairs)?
+            } else {
+                (template, SpokesShortened::default(), 0.0)
+            };
             let figures = figures_of(
                 &template,
                 &found,
                 shape,
                 mask,
-                [voxel, dice_before_fit, projection.max_displacement],
+                [
+                    voxel,
+                    dice_before_fit,
+                    projection.max_displacement.max(moved),
+                ],
             )?;
             let (placed, _) =
                 subdivided.band_put_back(&subdivided.sheet, put_back.iter().copied())?;
             let figures = TemplateFigures {
                 voxel_wanted_mm: wanted,
                 radius_lowered: RadiusLowered::between(&placed, &inflated_sheet, refits),
+                spokes_shortened: shortened,
                 band_put_back: put_back.into_iter().collect(),
                 ..figures
             };
@@ -482,6 +522,79 @@ impl RadiusLowered {
             refits,
         }
     }
+}
+
+/// How many times at most the spokes of a finished template are shortened in place where its
+/// boundary still crosses itself after [`REFITS`] fits again ([`template_of_shape`]): to
+/// `SHRINK⁵` ≈ 0.33 of their length at most.
+pub const SHORTENINGS: usize = 5;
+
+/// Where the spokes of the finished template were shortened in place because its boundary
+/// still crossed itself after [`REFITS`] fits again ([`SHORTENINGS`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SpokesShortened {
+    /// The atoms whose spokes were shortened.
+    pub atoms: Vec<usize>,
+    /// The least ratio of a shortened spoke to its length after the fit.
+    pub least_factor: f64,
+}
+
+/// `template` (fitted and projected) with the spokes of the atoms of its boundary triangles in
+/// the intersecting pairs `pairs` shortened by [`SHRINK`] about their medial points and the
+/// template projected again, up to [`SHORTENINGS`] times while its boundary crosses itself
+/// and each time at fewer pairs (a round that does not lower them is undone: triangles whose
+/// spokes point across each other cross at any length); with where and by how much, and the
+/// largest landmark move of the projections (mm). The
+/// mendings of [`built_at`] act before a fit, which can carry the boundary back to where it
+/// crossed (a wedge between sheets at a seam narrower than the shape's walls there); this one
+/// acts after the last fit, so it holds, at the cost of thickness at those atoms only.
+fn shortened_in_place(
+    mut template: MedialTemplate,
+    mut pairs: Vec<(usize, usize)>,
+) -> Result<(MedialTemplate, SpokesShortened, f64)> {
+    let mut factor = vec![1.0; template.medial_count()];
+    let mut moved: f64 = 0.0;
+    for _ in 0..SHORTENINGS {
+        if pairs.is_empty() {
+            break;
+        }
+        let atoms = template.medial_index();
+        let involved: BTreeSet<usize> = (pairs.iter())
+            .flat_map(|&(a, b)| [a, b])
+            .flat_map(|t| template.boundary_triangles()[t].map(|v| atoms[v]))
+            .collect();
+        let mut q = template.landmarks().to_vec();
+        for &m in &involved {
+            let centre = q[template.atom_landmark(m)];
+            for &b in template.spokes(m) {
+                q[b] = centre + SHRINK * (q[b] - centre);
+            }
+            factor[m] *= SHRINK;
+        }
+        let projection = project(&template.with_landmarks(&q)?, &ProjectOptions::default())?;
+        let crossing = self_intersections(&projection.template.boundary_mesh()?);
+        if crossing.len() >= pairs.len() {
+            // Not a crossing of spokes too long (triangles whose spokes point across each
+            // other cross at any length): the round is undone.
+            for &m in &involved {
+                factor[m] /= SHRINK;
+            }
+            break;
+        }
+        moved = moved.max(projection.max_displacement);
+        template = projection.template;
+        pairs = crossing;
+    }
+    let atoms: Vec<usize> = (0..factor.len()).filter(|&m| factor[m] < 1.0).collect();
+    let least_factor = factor.iter().copied().fold(1.0, f64::min);
+    Ok((
+        template,
+        SpokesShortened {
+            atoms,
+            least_factor,
+        },
+        moved,
+    ))
 }
 
 /// `sheet` (a subdivision of `subdivided` with its radii as lowered so far) mended at the
@@ -796,6 +909,7 @@ fn figures_of(
         dice_before_fit,
         final_projection_move_mm: moved,
         radius_lowered: RadiusLowered::default(),
+        spokes_shortened: SpokesShortened::default(),
         band_put_back: Vec::new(),
         sampled_again: None,
         summary,
@@ -922,6 +1036,7 @@ mod tests {
             dice_before_fit: 0.0,
             final_projection_move_mm: 0.0,
             radius_lowered: RadiusLowered::default(),
+            spokes_shortened: SpokesShortened::default(),
             band_put_back: Vec::new(),
             sampled_again: None,
             summary: TemplateSummary::default(),
@@ -977,6 +1092,71 @@ mod tests {
         assert_eq!(
             RadiusLowered::between(&sheet, &sheet, 0).atoms,
             Vec::<usize>::new()
+        );
+    }
+
+    /// A half cylinder of radius 3 mm inflated at radius 0.8 mm, the spokes of its three middle
+    /// columns then made 5 times as long: 4 mm, past the axis of the curve, so the concave
+    /// side's boundary crosses itself. Shortening in place mends it at the atoms involved
+    /// only, by at most `SHRINK^SHORTENINGS`.
+    #[test]
+    fn spokes_too_long_for_the_curve_are_shortened_where_the_boundary_crosses_itself() {
+        let (columns, rows) = (9, 5);
+        let points: Vec<Vec3> = (0..rows)
+            .flat_map(|j| {
+                (0..columns).map(move |i| {
+                    let theta = std::f64::consts::PI * i as f64 / (columns - 1) as f64;
+                    Vec3::new(3.0 * theta.cos(), 3.0 * theta.sin(), j as f64)
+                })
+            })
+            .collect();
+        let at = |i: usize, j: usize| j * columns + i;
+        let triangles: Vec<[usize; 3]> = (0..rows - 1)
+            .flat_map(|j| {
+                // Diagonals alternate, so that no corner triangle has two free edges.
+                (0..columns - 1).flat_map(move |i| {
+                    let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+                    if (i + j) % 2 == 0 {
+                        [[a, b, c], [a, c, d]]
+                    } else {
+                        [[a, b, d], [b, c, d]]
+                    }
+                })
+            })
+            .collect();
+        let sheet = MedialSheet::new(points, triangles, vec![0.8; columns * rows]).unwrap();
+        let inflated = inflate(&sheet).unwrap();
+        let template = MedialTemplate::new(
+            inflated.boundary,
+            inflated.medial_index,
+            inflated.medial_points,
+        )
+        .unwrap();
+        assert!(self_intersections(&template.boundary_mesh().unwrap()).is_empty());
+        let mut q = template.landmarks().to_vec();
+        for m in (0..template.medial_count()).filter(|m| (3..=5).contains(&(m % columns))) {
+            let centre = q[template.atom_landmark(m)];
+            for &b in template.spokes(m) {
+                q[b] = centre + 5.0 * (q[b] - centre);
+            }
+        }
+        let long = template.with_landmarks(&q).unwrap();
+        let pairs = self_intersections(&long.boundary_mesh().unwrap());
+        assert!(!pairs.is_empty());
+        let (mended, shortened, _) = shortened_in_place(long, pairs).unwrap();
+        assert!(self_intersections(&mended.boundary_mesh().unwrap()).is_empty());
+        assert!(
+            shortened.atoms.iter().any(|m| m % columns == 4),
+            "{shortened:?}"
+        );
+        assert!(
+            (shortened.atoms.iter()).all(|m| (2..=6).contains(&(m % columns))),
+            "{shortened:?}"
+        );
+        let least = SHRINK.powi(SHORTENINGS as i32);
+        assert!(
+            shortened.least_factor >= least - 1e-12 && shortened.least_factor <= SHRINK,
+            "{shortened:?}"
         );
     }
 
