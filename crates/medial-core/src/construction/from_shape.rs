@@ -26,6 +26,7 @@ use crate::construction::skeleton::{
     medial_points, sheet_of_mask, Sampling, ShapeSheet, Subdivided, MIN_FEATURE_ANGLE_DEG,
 };
 use crate::fit::augmented_lagrangian::CoarseTime;
+use crate::fit::guard::Guard;
 use crate::fit::optimize::ProgressRule;
 use crate::fit::plan::COARSE_TIME_STEPS;
 use crate::fit::run::automatic;
@@ -348,19 +349,21 @@ pub fn template_of_shape(
     let mut sampling = options.sampling;
     for _ in 0..DOUBLINGS {
         sampling = sampling.finer();
-        if let Ok(mut built) = build(sampling) {
-            if built.figures.verdict().is_ok() {
-                if to_beat.map_or(true, |dice| built.figures.dice > dice) {
-                    built.figures.sampled_again = Some(SampledAgain {
-                        first: options.sampling.to_string(),
-                        kept: sampling.to_string(),
-                        why,
-                    });
-                    return Ok(built.with(mask));
-                }
-                break;
-            }
+        let Ok(mut built) = build(sampling) else {
+            continue;
+        };
+        if built.figures.verdict().is_err() {
+            continue;
         }
+        if to_beat.is_some_and(|dice| built.figures.dice <= dice) {
+            break;
+        }
+        built.figures.sampled_again = Some(SampledAgain {
+            first: options.sampling.to_string(),
+            kept: sampling.to_string(),
+            why,
+        });
+        return Ok(built.with(mask));
     }
     first.map(|built| built.with(mask))
 }
@@ -542,9 +545,10 @@ pub struct SpokesShortened {
 /// `template` (fitted and projected) with the spokes of the atoms of its boundary triangles in
 /// the intersecting pairs `pairs` shortened by [`SHRINK`] about their medial points and the
 /// template projected again, up to [`SHORTENINGS`] times while its boundary crosses itself
-/// and each time at fewer pairs (a round that does not lower them is undone: triangles whose
-/// spokes point across each other cross at any length); with where and by how much, and the
-/// largest landmark move of the projections (mm). The
+/// and each time at fewer pairs (a round that does not lower them, or turns a boundary–medial
+/// prism inside out, is undone: triangles whose spokes point across each other cross at any
+/// length); with where and by how much, and the largest landmark move of the projections
+/// (mm). The
 /// mendings of [`built_at`] act before a fit, which can carry the boundary back to where it
 /// crossed (a wedge between sheets at a seam narrower than the shape's walls there); this one
 /// acts after the last fit, so it holds, at the cost of thickness at those atoms only.
@@ -552,35 +556,26 @@ fn shortened_in_place(
     mut template: MedialTemplate,
     mut pairs: Vec<(usize, usize)>,
 ) -> Result<(MedialTemplate, SpokesShortened, f64)> {
+    // The prisms' orientation after the fit: a round that turns one inside out is undone.
+    let guard = Guard::of_template(&template);
     let mut factor = vec![1.0; template.medial_count()];
     let mut moved: f64 = 0.0;
     for _ in 0..SHORTENINGS {
         if pairs.is_empty() {
             break;
         }
-        let atoms = template.medial_index();
-        let involved: BTreeSet<usize> = (pairs.iter())
-            .flat_map(|&(a, b)| [a, b])
-            .flat_map(|t| template.boundary_triangles()[t].map(|v| atoms[v]))
-            .collect();
-        let mut q = template.landmarks().to_vec();
-        for &m in &involved {
-            let centre = q[template.atom_landmark(m)];
-            for &b in template.spokes(m) {
-                q[b] = centre + SHRINK * (q[b] - centre);
-            }
-            factor[m] *= SHRINK;
-        }
+        let involved = atoms_of(&template, &pairs);
+        let q = spokes_scaled(&template, &involved, SHRINK);
         let projection = project(&template.with_landmarks(&q)?, &ProjectOptions::default())?;
         let crossing = self_intersections(&projection.template.boundary_mesh()?);
-        if crossing.len() >= pairs.len() {
-            // Not a crossing of spokes too long (triangles whose spokes point across each
-            // other cross at any length): the round is undone.
-            for &m in &involved {
-                factor[m] /= SHRINK;
-            }
+        // Fewer crossings, or not a crossing of spokes too long (triangles whose spokes point
+        // across each other cross at any length): the round is not kept.
+        if crossing.len() >= pairs.len()
+            || guard.check_fold(projection.template.landmarks()).is_err()
+        {
             break;
         }
+        involved.iter().for_each(|&m| factor[m] *= SHRINK);
         moved = moved.max(projection.max_displacement);
         template = projection.template;
         pairs = crossing;
@@ -597,6 +592,28 @@ fn shortened_in_place(
     ))
 }
 
+/// The atoms of the boundary triangles of `template` in the intersecting pairs `pairs`.
+fn atoms_of(template: &MedialTemplate, pairs: &[(usize, usize)]) -> BTreeSet<usize> {
+    let atoms = template.medial_index();
+    (pairs.iter())
+        .flat_map(|&(a, b)| [a, b])
+        .flat_map(|t| template.boundary_triangles()[t].map(|v| atoms[v]))
+        .collect()
+}
+
+/// The landmarks of `template` with the spokes of `atoms` scaled by `factor` about their
+/// medial points.
+fn spokes_scaled(template: &MedialTemplate, atoms: &BTreeSet<usize>, factor: f64) -> Vec<Vec3> {
+    let mut q = template.landmarks().to_vec();
+    for &m in atoms {
+        let centre = q[template.atom_landmark(m)];
+        for &b in template.spokes(m) {
+            q[b] = centre + factor * (q[b] - centre);
+        }
+    }
+    q
+}
+
 /// `sheet` (a subdivision of `subdivided` with its radii as lowered so far) mended at the
 /// atoms of the boundary triangles of `template` (inflated from it) in the intersecting pairs
 /// `pairs`: the atoms of a seam's band among them put back on the straight band the
@@ -610,12 +627,7 @@ fn mended(
     subdivided: &Subdivided,
     put_back: &mut BTreeSet<usize>,
 ) -> Result<MedialSheet> {
-    let boundary = template.boundary_mesh()?;
-    let atoms = template.medial_index();
-    let involved: BTreeSet<usize> = (pairs.iter())
-        .flat_map(|&(a, b)| [a, b])
-        .flat_map(|t| boundary.triangles()[t].map(|v| atoms[v]))
-        .collect();
+    let involved = atoms_of(template, pairs);
     let (moved_sheet, moved) = subdivided.band_put_back(sheet, involved.iter().copied())?;
     if !moved.is_empty() {
         put_back.extend(moved);
@@ -1133,14 +1145,10 @@ mod tests {
         )
         .unwrap();
         assert!(self_intersections(&template.boundary_mesh().unwrap()).is_empty());
-        let mut q = template.landmarks().to_vec();
-        for m in (0..template.medial_count()).filter(|m| (3..=5).contains(&(m % columns))) {
-            let centre = q[template.atom_landmark(m)];
-            for &b in template.spokes(m) {
-                q[b] = centre + 5.0 * (q[b] - centre);
-            }
-        }
-        let long = template.with_landmarks(&q).unwrap();
+        let middle = (0..template.medial_count())
+            .filter(|m| (3..=5).contains(&(m % columns)))
+            .collect();
+        let long = (template.with_landmarks(&spokes_scaled(&template, &middle, 5.0))).unwrap();
         let pairs = self_intersections(&long.boundary_mesh().unwrap());
         assert!(!pairs.is_empty());
         let (mended, shortened, _) = shortened_in_place(long, pairs).unwrap();

@@ -230,19 +230,32 @@ pub fn arc_of_points(points: &[MedialPoint], voxel: f64) -> Vec<f64> {
     if positions.len() < 2 {
         return vec![0.0; positions.len()];
     }
-    let spine = spine_of(points, voxel);
-    let spine = match opened(points, &spine, voxel) {
-        Some(open) => spine_of(&open, voxel),
+    let spine = smoothed_spine(&spine_of(points, voxel));
+    let seam = match opened(points, &spine, voxel) {
+        Some(open) => smoothed_spine(&spine_of(&open, voxel)),
         None => spine,
     };
-    // The path zigzags through the points across the seam: smoothed as the bins are.
-    let n = spine.len();
-    let points = smoothed_across(&spine);
-    let seam = Seam {
-        radius: vec![0.0; n],
-        points,
-    };
     positions.iter().map(|p| seam.arc_of(p)).collect()
+}
+
+/// The spine `spine` as a polyline (radius 0): the path zigzags through the points across the
+/// seam, so it is smoothed as the bins are.
+fn smoothed_spine(spine: &[Vec3]) -> Seam {
+    Seam {
+        radius: vec![0.0; spine.len()],
+        points: smoothed_across(spine),
+    }
+}
+
+/// The mean seam ball of `points` (mm, [`ball_of`]).
+fn mean_ball(points: &[MedialPoint], voxel: f64) -> f64 {
+    points.iter().map(|p| ball_of(p, voxel)).sum::<f64>() / points.len() as f64
+}
+
+/// How many of a seam's `n` points lie along one seam ball `ball` of a spine of length
+/// `length` (mm): `n·b̄/L`, what a scrap has fewer of ([`arc_of_points`]).
+fn per_ball(n: usize, ball: f64, length: f64) -> f64 {
+    n as f64 * ball / length.max(ball)
 }
 
 /// A seam's points close into a loop when more than this many seam balls' worth of them
@@ -257,24 +270,19 @@ const LOOP_SECTORS: usize = 24;
 
 /// The seam's points `points` less the sector of [`LOOP_SECTORS`] about their centre (in
 /// their principal plane) where their mean radius is least, when they close into a loop round
-/// their spine `spine` ([`LOOP_BALLS`]); `None` when they do not. A seam is where three sheets
+/// their smoothed spine `spine` ([`LOOP_BALLS`]); `None` when they do not. A seam is where three sheets
 /// meet, and its ball is smallest where the junction fades: the two ventricles' insertion
 /// lines meet round the RV's apex, where the RV cavity tapers to nothing and the three walls
 /// become one; on a segmentation rotated against its voxels the junction is found all the
 /// way round (decision 0408), and the seam, which the stitching needs with two ends, is
 /// opened there.
-fn opened(points: &[MedialPoint], spine: &[Vec3], voxel: f64) -> Option<Vec<MedialPoint>> {
+fn opened(points: &[MedialPoint], spine: &Seam, voxel: f64) -> Option<Vec<MedialPoint>> {
     let n = points.len();
-    let mean_ball = points.iter().map(|p| ball_of(p, voxel)).sum::<f64>() / n as f64;
-    let probe = Seam {
-        radius: vec![0.0; spine.len()],
-        points: smoothed_across(spine),
-    };
-    let per_ball = n as f64 * mean_ball / probe.length().max(mean_ball);
+    let ball = mean_ball(points, voxel);
     let far = (points.iter())
-        .filter(|p| probe.distance(&p.position) > mean_ball)
+        .filter(|p| spine.distance(&p.position) > ball)
         .count();
-    if (far as f64) <= LOOP_BALLS * per_ball {
+    if (far as f64) <= LOOP_BALLS * per_ball(n, ball, spine.length()) {
         return None;
     }
     let centre = points.iter().map(|p| p.position).sum::<Vec3>() / n as f64;
@@ -319,7 +327,7 @@ fn opened(points: &[MedialPoint], spine: &[Vec3], voxel: f64) -> Option<Vec<Medi
 fn spine_of(points: &[MedialPoint], voxel: f64) -> Vec<Vec3> {
     let positions: Vec<Vec3> = points.iter().map(|p| p.position).collect();
     let n = positions.len();
-    let mean_ball = points.iter().map(|p| ball_of(p, voxel)).sum::<f64>() / n as f64;
+    let ball = mean_ball(points, voxel);
     let mut spine = Vec::new();
     for link in LINKS_VOXELS.map(|l| l * voxel) {
         let neighbours = neighbours_within(&positions, link);
@@ -350,10 +358,10 @@ fn spine_of(points: &[MedialPoint], voxel: f64) -> Vec<Vec3> {
             at = previous[at];
             spine.push(positions[at]);
         }
-        let per_ball = n as f64 * mean_ball / length.max(mean_ball);
+        let scrap = per_ball(n, ball, length);
         let scraps_only = (0..n)
             .filter(|&p| p != largest && size[p] > 0)
-            .all(|p| (size[p] as f64) < per_ball);
+            .all(|p| (size[p] as f64) < scrap);
         if scraps_only {
             break;
         }
