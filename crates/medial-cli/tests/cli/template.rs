@@ -246,6 +246,8 @@ fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam_wherever_its_voxels
         );
         assert!(f(&figures["dice"]) >= 0.93, "moved by {by:?}: {figures}");
         assert!(figures["sampled_again"].is_object(), "{figures}");
+        assert!(figures["band_put_back"].is_array(), "{figures}");
+        assert!(figures["spokes_shortened"]["atoms"].is_array(), "{figures}");
         assert!(f(&figures["max_spoke_normal_deg"]) <= 0.1, "{figures}");
         assert!(f(&figures["max_spoke_mismatch_pct"]) <= 0.1, "{figures}");
         for key in ["closed_manifold", "outward", "self_intersection_free"] {
