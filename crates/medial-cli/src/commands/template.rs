@@ -176,12 +176,21 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
         );
     }
     if let Some(again) = &built.figures.sampled_again {
+        let not_kept: Vec<&str> = again.not_kept.iter().map(|n| &n.sampling[..]).collect();
+        let kept = if again.kept == again.first {
+            "the first is kept".to_string()
+        } else {
+            format!("the one built again from {} is kept", again.kept)
+        };
+        let others = if not_kept.is_empty() {
+            String::new()
+        } else {
+            format!(" and not the one from {}", not_kept.join(" or "))
+        };
         tracing::warn!(
-            "the template from {} fell short ({}); the one built again from {} is kept \
-             (`sampled_again`)",
+            "the template from {} fell short ({}); {kept}{others} (`sampled_again` says why)",
             again.first,
             again.why,
-            again.kept
         );
     }
     let put_back = &built.figures.band_put_back;

@@ -245,7 +245,12 @@ fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam_wherever_its_voxels
             "{figures}"
         );
         assert!(f(&figures["dice"]) >= 0.93, "moved by {by:?}: {figures}");
-        assert!(figures["sampled_again"].is_object(), "{figures}");
+        let again = &figures["sampled_again"];
+        assert_ne!(
+            again["kept"], again["first"],
+            "built again and kept: {figures}"
+        );
+        assert!(again["not_kept"].is_array(), "{figures}");
         assert!(figures["band_put_back"].is_array(), "{figures}");
         assert!(figures["spokes_shortened"]["atoms"].is_array(), "{figures}");
         assert!(f(&figures["max_spoke_normal_deg"]) <= 0.1, "{figures}");

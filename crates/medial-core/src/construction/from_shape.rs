@@ -205,7 +205,7 @@ pub struct TemplateFigures {
     pub stretch: Vec<usize>,
     /// Sheets of the medial points (stitched along the seams).
     pub sheets: usize,
-    /// Seams of the medial points.
+    /// Seams the sheets are stitched along (those of the medial points some sheet reaches).
     pub seams: usize,
     /// Voxel Dice of the template against the shape on the fine grid.
     pub dice: f64,
@@ -245,9 +245,9 @@ pub struct TemplateFigures {
     /// their places on the medial points made the boundary intersect itself (before any
     /// radius is lowered there).
     pub band_put_back: Vec<usize>,
-    /// Why the template was built again from a sheet sampled twice as finely, when the
-    /// sampling asked for gave a template unsound or below [`TARGET_DICE`] that the finer one
-    /// mends or betters.
+    /// Why the template was built again from a sheet sampled twice as finely (the sampling
+    /// asked for gave a template unsound or below [`TARGET_DICE`]), which sampling was kept,
+    /// and why the others were not; `None` when it was not built again.
     pub sampled_again: Option<SampledAgain>,
     /// The template's summary.
     pub summary: TemplateSummary,
@@ -264,6 +264,24 @@ pub enum Verdict {
     /// It leaves out a wall: the share of the shape in the largest piece of medial points left
     /// out of its sheet, above [`LEFT_OUT_LIMIT`].
     WallLeftOut(f64),
+}
+
+impl std::fmt::Display for Verdict {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Unsound(causes) => write!(f, "{}", causes.join(", ")),
+            Self::ConstraintsNotMet(angle, mismatch) => write!(
+                f,
+                "constraints at {angle:.2}° and {mismatch:.2} %, above {MAX_ANGLE_DEG}° and \
+                 {MAX_MISMATCH_PCT} %"
+            ),
+            Self::WallLeftOut(share) => write!(
+                f,
+                "a wall of {:.0} % of the shape left out of its sheet",
+                100.0 * share
+            ),
+        }
+    }
 }
 
 impl TemplateFigures {
@@ -312,8 +330,10 @@ impl TemplateFigures {
 /// sheet sampled twice as finely ([`Sampling::finer`]), up to [`DOUBLINGS`] times until one is
 /// sound: atoms far apart for the shape's walls and junctions are a fixable start, and a
 /// lattice of whole rings can give a sheet fewer atoms than asked. The first sound finer
-/// template is kept when the first was unsound or it matches the shape better (the figures'
-/// [`TemplateFigures::sampled_again`] say why), else the first outcome is returned.
+/// template is kept when the first was unsound or it matches the shape better, else the
+/// first outcome is returned; the figures' [`TemplateFigures::sampled_again`] say why it was
+/// built again, which was kept and why the others were not, and an error says which finer
+/// samplings were tried.
 pub fn template_of_shape(
     shape: &Shape,
     options: &TemplateOptions,
@@ -332,7 +352,7 @@ pub fn template_of_shape(
     // What twice the atoms may mend, and the Dice to beat where the first template is sound.
     let (why, to_beat) = match &first {
         Ok(built) => match built.figures.verdict() {
-            Err(Verdict::Unsound(causes)) => (causes.join(", "), None),
+            Err(verdict @ Verdict::Unsound(_)) => (verdict.to_string(), None),
             Ok(()) if built.figures.dice < TARGET_DICE => (
                 format!(
                     "voxel Dice {:.3} against the shape, below the target {TARGET_DICE}",
@@ -346,26 +366,55 @@ pub fn template_of_shape(
         Err(_) => return first.map(|built| built.with(mask)),
     };
     // Finer until one is sound: kept if it betters a sound first.
+    let again = |kept: Sampling, not_kept: Vec<NotKept>| SampledAgain {
+        first: options.sampling.to_string(),
+        kept: kept.to_string(),
+        why: why.clone(),
+        not_kept,
+    };
     let mut sampling = options.sampling;
+    let mut not_kept = Vec::new();
     for _ in 0..DOUBLINGS {
         sampling = sampling.finer();
-        let Ok(mut built) = build(sampling) else {
-            continue;
+        let mut refused = |why: String| {
+            not_kept.push(NotKept {
+                sampling: sampling.to_string(),
+                why,
+            })
         };
-        if built.figures.verdict().is_err() {
+        let mut built = match build(sampling) {
+            Ok(built) => built,
+            Err(e) => {
+                refused(e.to_string());
+                continue;
+            }
+        };
+        if let Err(verdict) = built.figures.verdict() {
+            refused(verdict.to_string());
             continue;
         }
-        if to_beat.is_some_and(|dice| built.figures.dice <= dice) {
+        if let Some(dice) = to_beat.filter(|&dice| built.figures.dice <= dice) {
+            refused(format!(
+                "voxel Dice {:.3}, not above the first's {dice:.3}",
+                built.figures.dice
+            ));
             break;
         }
-        built.figures.sampled_again = Some(SampledAgain {
-            first: options.sampling.to_string(),
-            kept: sampling.to_string(),
-            why,
-        });
+        built.figures.sampled_again = Some(again(sampling, not_kept));
         return Ok(built.with(mask));
     }
-    first.map(|built| built.with(mask))
+    let tried: Vec<String> = not_kept.iter().map(|n| n.sampling.clone()).collect();
+    match first {
+        Ok(mut built) => {
+            built.figures.sampled_again = Some(again(options.sampling, not_kept));
+            Ok(built.with(mask))
+        }
+        Err(Error::InvalidTemplate(e)) => Err(Error::InvalidTemplate(format!(
+            "{e}; built again from {}, none was sound",
+            tried.join(" and ")
+        ))),
+        Err(e) => Err(e),
+    }
 }
 
 /// How many times at most a template is built again, each time from twice the atoms of the
@@ -381,6 +430,19 @@ pub struct SampledAgain {
     /// The sampling of the template kept.
     pub kept: String,
     /// What was wrong with the template built from the first.
+    pub why: String,
+    /// The finer samplings tried and not kept, in order, each with why (the first is kept
+    /// when none betters it).
+    pub not_kept: Vec<NotKept>,
+}
+
+/// A finer sampling tried and not kept ([`SampledAgain`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct NotKept {
+    /// The sampling.
+    pub sampling: String,
+    /// Why its template was not kept: the build's error, what was unsound, or a Dice not
+    /// above the first's.
     pub why: String,
 }
 
@@ -432,7 +494,7 @@ fn built_at(
                  edges, the sharpest near ({:.1}, {:.1}, {:.1}) mm: the shape probably \
                  branches there (sheets meeting at a seam that was not found; {} seams \
                  found), and a folded sheet cannot be inflated ({e})",
-                fold.max_deg, fold.edges, fold.at.x, fold.at.y, fold.at.z, found.branching.seams
+                fold.max_deg, fold.edges, fold.at.x, fold.at.y, fold.at.z, found.seams.len()
             )),
                     None => e,
                 }
@@ -906,7 +968,7 @@ fn figures_of(
         rings: found.lattices.iter().map(|l| l.rings).collect(),
         stretch: found.lattices.iter().map(|l| l.stretch).collect(),
         sheets: found.branching.sheets,
-        seams: found.branching.seams,
+        seams: found.seams.len(),
         dice,
         dice_input_grid,
         meets_targets,

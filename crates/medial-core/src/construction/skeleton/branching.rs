@@ -82,7 +82,8 @@ impl Branches {
 ///    than 5 % of the points (`MIN_SHEET_FRACTION`) are spurs and are dropped.
 /// 3. A seam that at least three pieces reach (a point within twice the ball of one of its
 ///    points) and that is a line (its points span more than twice their mean ball) is a seam;
-///    the pieces on either side of one that fewer reach are one sheet.
+///    the pieces on either side of one that fewer reach are one sheet, unless that leaves
+///    fewer than three sheets at a seam (`parts_a_seam`).
 /// 4. The points left out of the pieces near a seam, and those of lines of non-flat points
 ///    that are not seams, go to the sheet of the nearest point of a piece within twice the
 ///    widest ball.
@@ -277,7 +278,6 @@ fn branches_bridged(non_flat: &NonFlat, voxel: f64, bridges: &[(Vec3, f64)]) -> 
     }
     let slot = |p: usize| kept.binary_search(&p).expect("a kept piece");
     let mut sheets = UnionFind::new(kept.len());
-    let mut seam_numbers: Vec<usize> = Vec::new();
     // A seam is a line: its points span more than twice their mean ball (fewer are a spot
     // where sheets touch or a bump's tip, seen as non-flat by every ball about it).
     let mut span: HashMap<usize, (Vec3, Vec3, f64, usize)> = HashMap::new();
@@ -292,19 +292,31 @@ fn branches_bridged(non_flat: &NonFlat, voxel: f64, bridges: &[(Vec3, f64)]) -> 
         let (lo, hi, balls, n) = span[&seam];
         (hi - lo).norm() > 2.0 * balls / n as f64
     };
+    let mut lines: Vec<(usize, Vec<usize>)> = (reach.iter())
+        .map(|(&seam, pieces)| (seam, pieces.iter().map(|&p| slot(p)).collect()))
+        .collect();
+    lines.sort_unstable();
+    // Seams first, ascending: lines that three or more pieces reach.
+    let seam_numbers: Vec<usize> = (lines.iter())
+        .filter(|(seam, pieces)| pieces.len() >= 3 && a_line(*seam))
+        .map(|(seam, _)| *seam)
+        .collect();
+    // The slots of the pieces that reach each seam.
+    let at_seams: Vec<&[usize]> = (lines.iter())
+        .filter(|(seam, _)| seam_numbers.contains(seam))
+        .map(|(_, pieces)| &pieces[..])
+        .collect();
     let mut two_sided = Vec::new();
-    for (&seam, pieces) in &reach {
-        let pieces: Vec<usize> = pieces.iter().map(|&p| slot(p)).collect();
-        if pieces.len() >= 3 && a_line(seam) {
-            seam_numbers.push(seam);
-        } else if let [a, b] = pieces[..] {
-            sheets.union(a, b);
-            if a_line(seam) {
-                two_sided.push(seam);
+    for (seam, pieces) in &lines {
+        if let [a, b] = pieces[..] {
+            if !parts_a_seam(&mut sheets, a, b, &at_seams) {
+                sheets.union(a, b);
+            }
+            if a_line(*seam) {
+                two_sided.push(*seam);
             }
         }
     }
-    two_sided.sort_unstable();
     let two_sided = (two_sided.iter())
         .map(|&s| {
             (seam_points.iter().enumerate())
@@ -313,7 +325,6 @@ fn branches_bridged(non_flat: &NonFlat, voxel: f64, bridges: &[(Vec3, f64)]) -> 
                 .collect()
         })
         .collect();
-    seam_numbers.sort_unstable();
     let roots: Vec<usize> = (0..kept.len()).map(|k| sheets.find(k)).collect();
     let mut distinct = roots.clone();
     distinct.sort_unstable();
@@ -352,6 +363,23 @@ fn branches_bridged(non_flat: &NonFlat, voxel: f64, bridges: &[(Vec3, f64)]) -> 
         branches,
         two_sided,
     }
+}
+
+/// Whether joining the pieces `a` and `b` into one sheet (`sheets`, over the slots of the
+/// kept pieces) would leave fewer than three sheets at one of the seams, each given by the
+/// pieces that reach it (`at_seams`). A seam is where at least three sheets meet, so a spot
+/// or line of non-flat points that only two of its pieces reach does not make them one sheet:
+/// it is where the seam is broken (a ventricle's insertion lines fading at the RV's apex, the
+/// walls near each other across the gap), not a fold of one sheet.
+fn parts_a_seam(sheets: &mut UnionFind, a: usize, b: usize, at_seams: &[&[usize]]) -> bool {
+    let (ra, rb) = (sheets.find(a), sheets.find(b));
+    ra != rb
+        && at_seams.iter().any(|pieces| {
+            let mut roots: Vec<usize> = pieces.iter().map(|&p| sheets.find(p)).collect();
+            roots.sort_unstable();
+            roots.dedup();
+            roots.len() < 4 && roots.contains(&ra) && roots.contains(&rb)
+        })
 }
 
 /// Gives every point off the seams and off the sheets (`sheet` and `seam` both `None`) the
@@ -791,6 +819,28 @@ pub(crate) mod tests {
             }
         }
         assert_eq!(fin_of_sheet.len(), 3);
+        // A plate from the far edge of the first fin to that of the second (30° to each):
+        // the two folds there are reached by two pieces each, but joining both would leave
+        // the seam two sheets; the plate joins one of them.
+        let a = Vec3::new(0.0, 12.0, 0.0);
+        let b = 12.0 * Vec3::new(210f64.to_radians().cos(), 210f64.to_radians().sin(), 0.0);
+        let mut closed = points.clone();
+        for i in 1..41 {
+            for j in -16..=16 {
+                closed.push(MedialPoint {
+                    position: a + (i as f64 / 41.0) * (b - a) + Vec3::new(0.0, 0.0, 0.5 * j as f64),
+                    radius: 1.0,
+                });
+            }
+        }
+        let closed = branching(&closed, 0.5);
+        assert_eq!(
+            (closed.counts.sheets, closed.counts.seams),
+            (3, 1),
+            "{:?}",
+            closed.counts
+        );
+        assert_eq!(closed.seam_sheets, vec![vec![0, 1, 2]]);
         // Two fins at 120°: one sheet folded along a line, not a seam.
         let fold = branching(&fins(&[90.0, 210.0]), 0.5).counts;
         assert_eq!((fold.sheets, fold.seams), (1, 0), "{fold:?}");

@@ -48,7 +48,7 @@ use disc::{lattice_sheet, ChartedCloud, SheetFit};
 use lattice::Lattice;
 use region::Region;
 use seam::Seam;
-use stitch::{free_edges, stitch, CUT_RADII, CUT_SPACINGS};
+use stitch::{free_edges, stitch, Stitch, CUT_RADII, CUT_SPACINGS};
 
 pub use ridge::{medial_pieces, medial_points, MedialPoint};
 
@@ -142,7 +142,8 @@ pub struct ShapeSheet {
     /// The sheet's points on its free edges: in order round it for a single sheet, ascending
     /// for several.
     pub border: Vec<usize>,
-    /// The seams as sampled: their vertices are the sheet's first, seam after seam.
+    /// The seams as sampled and stitched along (those some sheet reaches, [`stitch()`]): their
+    /// vertices are the sheet's first, seam after seam.
     pub seams: Vec<Seam>,
     /// The sheets and seams of the medial points.
     pub branching: Branching,
@@ -350,16 +351,17 @@ fn several_sheets(
             }
         }
     }
+    let Stitched { stitched, built } = best;
     Ok(ShapeSheet {
-        sheet_of_point: best.sheet_of_point,
-        border: free_edge_points(&best.sheet),
-        sheet: best.sheet,
-        spur_free_points: best.built.iter().map(|b| b.fit.cloud().len()).sum(),
+        sheet_of_point: stitched.sheet_of_point,
+        border: free_edge_points(&stitched.sheet),
+        sheet: stitched.sheet,
+        spur_free_points: built.iter().map(|b| b.fit.cloud().len()).sum(),
         medial_points: points,
         left_out: 0.0,
-        lattices: best.built.iter().map(|b| b.lattice.clone()).collect(),
-        fits: best.built.into_iter().map(|b| b.fit).collect(),
-        seams: best.seams,
+        lattices: built.iter().map(|b| b.lattice.clone()).collect(),
+        fits: built.into_iter().map(|b| b.fit).collect(),
+        seams: stitched.seams,
         branching: counts,
     })
 }
@@ -373,10 +375,8 @@ const COUNT_SLACK: f64 = 0.1;
 
 /// The sheets of a branching shape sampled at one spacing and stitched along its seams.
 struct Stitched {
-    sheet: MedialSheet,
-    sheet_of_point: Vec<Option<usize>>,
+    stitched: Stitch,
     built: Vec<SampledSheet>,
-    seams: Vec<Seam>,
 }
 
 impl Stitched {
@@ -406,18 +406,13 @@ impl Stitched {
                 clipped(seam, &along, REACH_SPACINGS * lattice_spacing).resampled(lattice_spacing)
             })
             .collect();
-        let (sheet, sheet_of_point) = stitch(&sheets, &seams, CUT_SPACINGS * lattice_spacing)?;
-        Ok(Self {
-            sheet,
-            sheet_of_point,
-            built,
-            seams,
-        })
+        let stitched = stitch(&sheets, &seams, CUT_SPACINGS * lattice_spacing)?;
+        Ok(Self { stitched, built })
     }
 
     /// The atoms after one Loop subdivision.
     fn atoms(&self) -> usize {
-        self.sheet.subdivided_point_count()
+        self.stitched.sheet.subdivided_point_count()
     }
 }
 

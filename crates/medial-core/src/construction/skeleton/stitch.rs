@@ -23,42 +23,82 @@ pub const CUT_SPACINGS: f64 = 0.5;
 /// (its subdivided band points came `0.50·r` from the seam); 1.6 leaves a margin.
 pub const CUT_RADII: f64 = 1.6;
 
+/// A stitched sheet ([`stitch()`]).
+#[derive(Clone, Debug)]
+pub struct Stitch {
+    /// The sheets as one: the kept seams' vertices, seam after seam, then each sheet's kept
+    /// vertices, sheet after sheet; its triangles keep each sheet's orientation.
+    pub sheet: MedialSheet,
+    /// The sheet of each of its points (`None` on a seam).
+    pub sheet_of_point: Vec<Option<usize>>,
+    /// The seams stitched along, in their order: those some sheet reaches.
+    pub seams: Vec<Seam>,
+}
+
 /// The sheets `sheets` (each a triangulated disc, consistently oriented) stitched along the
 /// seams `seams` (polylines sampled about as finely as the sheets), with `cut` (mm) the
-/// distance from a seam within which a sheet's vertices are dropped. The stitched sheet's
-/// points are the seams' vertices, seam after seam, then each sheet's kept vertices, sheet
-/// after sheet; its triangles keep each sheet's orientation.
+/// distance from a seam within which a sheet's vertices are dropped.
 ///
 /// For every sheet: the vertices within `cut` of a seam or [`CUT_RADII`] times its radius
-/// there are dropped with their triangles; its free edges form loops; the longest run of
-/// consecutive loop vertices that lost a triangle and are nearest to seam `s` is the cut along
-/// `s`, zipped to `s` ([`zip`]). Then the ears are dropped (`drop_ears`) and the points no
-/// triangle uses (the order of the others kept).
+/// there are dropped with their triangles, and any vertex the cut leaves pinched (its kept
+/// triangles two fans that meet only at it) with them; its free edges form loops; the
+/// longest run of consecutive loop vertices that lost a triangle and are nearest to seam `s`
+/// is the cut along `s`, zipped to `s` ([`zip`]). Then the ears are dropped (`drop_ears`)
+/// and the points no triangle uses (the order of the others kept).
 ///
-/// With the stitched sheet, the sheet of each of its points (`None` on a seam).
+/// A seam along which no sheet's cut runs has nothing to stitch: a piece of a seam found
+/// apart from a longer one beside it (a ring of insertion lines broken in two), every cut
+/// vertex near it being nearer the longer one. It is dropped, and the sheets are cut and
+/// stitched again along the others (the last seam first when several are unreached), so that
+/// no band is cut off along a seam nothing fills.
 ///
-/// Errors: `InvalidVolume` when a sheet's free edges do not form simple loops after the cut
-/// (it fell apart) or a seam has no sheet along it; those of [`MedialSheet::new`] (an edge in
-/// more than three triangles: more than three sheets at a seam).
-pub fn stitch(
+/// Errors: `InvalidVolume` when no sheet reaches any seam; those of [`MedialSheet::new`] (an
+/// edge in more than three triangles: more than three sheets at a seam).
+pub fn stitch(sheets: &[MedialSheet], seams: &[Seam], cut: f64) -> Result<Stitch> {
+    let mut seams = seams.to_vec();
+    loop {
+        let cut_sheets: Vec<CutSheet> = (sheets.iter())
+            .map(|sheet| CutSheet::new(sheet, &seams, cut))
+            .collect();
+        let runs: Vec<Vec<Option<Vec<usize>>>> = (cut_sheets.iter().zip(sheets))
+            .map(|(c, sheet)| {
+                (0..seams.len())
+                    .map(|s| c.run_along(s, sheet, &seams))
+                    .collect()
+            })
+            .collect();
+        let reached = |s: usize| runs.iter().any(|r| r[s].is_some());
+        match (0..seams.len()).rev().find(|&s| !reached(s)) {
+            Some(_) if seams.len() == 1 => {
+                return Err(Error::InvalidVolume(
+                    "no medial sheet reaches the seam found: nothing to stitch along it".into(),
+                ))
+            }
+            Some(s) => {
+                seams.remove(s);
+            }
+            None => return stitched(sheets, seams, &cut_sheets, &runs),
+        }
+    }
+}
+
+/// The sheets `sheets`, cut as `cut_sheets` say, zipped along the `seams` at the cuts' `runs`
+/// (per sheet and seam): [`stitch()`] once every seam is reached.
+fn stitched(
     sheets: &[MedialSheet],
-    seams: &[Seam],
-    cut: f64,
-) -> Result<(MedialSheet, Vec<Option<usize>>)> {
+    seams: Vec<Seam>,
+    cut_sheets: &[CutSheet],
+    runs: &[Vec<Option<Vec<usize>>>],
+) -> Result<Stitch> {
     let mut points: Vec<Vec3> = seams.iter().flat_map(|s| s.points.clone()).collect();
     let mut radius: Vec<f64> = seams.iter().flat_map(|s| s.radius.clone()).collect();
     let mut label: Vec<Option<usize>> = vec![None; points.len()];
     let mut first = vec![0];
-    for s in seams {
+    for s in &seams {
         first.push(first[first.len() - 1] + s.points.len());
     }
-    let seam_vertices: Vec<Vec<usize>> = (0..seams.len())
-        .map(|s| (first[s]..first[s + 1]).collect())
-        .collect();
     let mut triangles = Vec::new();
-    let mut sheets_along = vec![0; seams.len()];
-    for (k, sheet) in sheets.iter().enumerate() {
-        let cut_sheet = CutSheet::new(sheet, seams, cut)?;
+    for (k, (sheet, cut_sheet)) in sheets.iter().zip(cut_sheets).enumerate() {
         let offset = points.len();
         let global: HashMap<usize, usize> = (cut_sheet.used.iter().enumerate())
             .map(|(k, &v)| (v, offset + k))
@@ -68,10 +108,9 @@ pub fn stitch(
         label.extend(cut_sheet.used.iter().map(|_| Some(k)));
         triangles.extend(cut_sheet.triangles.iter().map(|t| t.map(|v| global[&v])));
         for (s, seam) in seams.iter().enumerate() {
-            let Some(run) = cut_sheet.run_along(s, sheet, seams) else {
+            let Some(run) = &runs[k][s] else {
                 continue;
             };
-            sheets_along[s] += 1;
             let mut run: Vec<usize> = run.iter().map(|v| global[v]).collect();
             // A seam that curves round on itself (a septum's rim) has its ends near each
             // other, and a run along it may pass from one end to the other: the run starts
@@ -84,20 +123,15 @@ pub fn stitch(
             // than the other (a seam curved round on itself, as a ventricle's insertion
             // lines are, has ends too near each other for a direction between them to tell).
             let (start, end) = (points[run[0]], points[run[run.len() - 1]]);
-            let (first, last) = (seam.points[0], seam.points[seam.points.len() - 1]);
-            let mut b = seam_vertices[s].clone();
-            if (start - last).norm() + (end - first).norm()
-                < (start - first).norm() + (end - last).norm()
+            let (first_point, last_point) = (seam.points[0], seam.points[seam.points.len() - 1]);
+            let mut b: Vec<usize> = (first[s]..first[s + 1]).collect();
+            if (start - last_point).norm() + (end - first_point).norm()
+                < (start - first_point).norm() + (end - last_point).norm()
             {
                 b.reverse();
             }
             zip(&run, &b, &points, &mut triangles);
         }
-    }
-    if let Some(s) = sheets_along.iter().position(|&n| n == 0) {
-        return Err(Error::InvalidVolume(format!(
-            "no medial sheet reaches seam {s}: nothing to stitch along it"
-        )));
     }
     drop_ears(&mut triangles);
     let (kept, triangles) = used_only(points.len(), &triangles);
@@ -106,7 +140,11 @@ pub fn stitch(
         triangles,
         kept.iter().map(|&v| radius[v]).collect(),
     )?;
-    Ok((sheet, kept.iter().map(|&v| label[v]).collect()))
+    Ok(Stitch {
+        sheet,
+        sheet_of_point: kept.iter().map(|&v| label[v]).collect(),
+        seams,
+    })
 }
 
 /// Where the run of a sheet's cut whose points lie at arc lengths `arcs` along a seam of length
@@ -187,17 +225,26 @@ struct CutSheet {
 }
 
 impl CutSheet {
-    /// `sheet` less its vertices within `cut` of a seam and their triangles.
-    ///
-    /// Errors: `InvalidVolume` when the free edges left do not form simple loops.
-    fn new(sheet: &MedialSheet, seams: &[Seam], cut: f64) -> Result<Self> {
-        let near_seam: Vec<bool> = (sheet.points().iter())
+    /// `sheet` less its vertices within `cut` of a seam and their triangles, and less the
+    /// vertices that leaves pinched (two fans of kept triangles meeting only at the vertex,
+    /// where a cut's two sides touch), again until none is: its free edges then form simple
+    /// loops.
+    fn new(sheet: &MedialSheet, seams: &[Seam], cut: f64) -> Self {
+        let mut dropped: Vec<bool> = (sheet.points().iter())
             .map(|p| (seams.iter()).any(|s| s.distance(p) <= cut.max(CUT_RADII * s.radius_near(p))))
             .collect();
-        let triangles: Vec<[usize; 3]> = (sheet.triangles().iter())
-            .filter(|t| t.iter().all(|&v| !near_seam[v]))
-            .copied()
-            .collect();
+        let (triangles, free) = loop {
+            let triangles: Vec<[usize; 3]> = (sheet.triangles().iter())
+                .filter(|t| t.iter().all(|&v| !dropped[v]))
+                .copied()
+                .collect();
+            let free = free_edges(&triangles);
+            let pinched = pinched(&free);
+            if pinched.is_empty() {
+                break (triangles, free);
+            }
+            pinched.into_iter().for_each(|v| dropped[v] = true);
+        };
         let kept: HashSet<[usize; 3]> = triangles.iter().copied().collect();
         let used: HashSet<usize> = triangles.iter().flatten().copied().collect();
         let cut: HashSet<usize> = (sheet.triangles().iter())
@@ -208,13 +255,12 @@ impl CutSheet {
             .collect();
         let mut used: Vec<usize> = used.into_iter().collect();
         used.sort_unstable();
-        let loops = loops_of(&free_edges(&triangles))?;
-        Ok(Self {
+        Self {
+            loops: loops_of(&free),
             triangles,
             used,
-            loops,
             cut,
-        })
+        }
     }
 
     /// The longest run of consecutive vertices of a free-edge loop that lost a triangle to the
@@ -249,17 +295,22 @@ pub(super) fn free_edges(triangles: &[[usize; 3]]) -> HashSet<(usize, usize)> {
         .collect()
 }
 
-/// The loops of the directed free edges `free`; `InvalidVolume` when a vertex starts two.
-fn loops_of(free: &HashSet<(usize, usize)>) -> Result<Vec<Vec<usize>>> {
-    let mut next: HashMap<usize, usize> = HashMap::new();
-    for &(u, v) in free {
-        if next.insert(u, v).is_some() {
-            return Err(Error::InvalidVolume(format!(
-                "a medial sheet cut at a seam is pinched at its vertex {u}: two of its free \
-                 edges start there"
-            )));
-        }
-    }
+/// The vertices that start more than one of the directed free edges `free`, ascending: where
+/// two fans of triangles meet at a vertex only.
+fn pinched(free: &HashSet<(usize, usize)>) -> Vec<usize> {
+    let mut starts: HashMap<usize, usize> = HashMap::new();
+    free.iter()
+        .for_each(|&(u, _)| *starts.entry(u).or_default() += 1);
+    let mut pinched: Vec<usize> = (starts.into_iter())
+        .filter_map(|(v, n)| (n > 1).then_some(v))
+        .collect();
+    pinched.sort_unstable();
+    pinched
+}
+
+/// The loops of the directed free edges `free`, none of whose vertices is [`pinched`].
+fn loops_of(free: &HashSet<(usize, usize)>) -> Vec<Vec<usize>> {
+    let next: HashMap<usize, usize> = free.iter().copied().collect();
     let mut starts: Vec<usize> = next.keys().copied().collect();
     starts.sort_unstable();
     let mut seen = HashSet::new();
@@ -275,7 +326,7 @@ fn loops_of(free: &HashSet<(usize, usize)>) -> Result<Vec<Vec<usize>>> {
             loops.push(l);
         }
     }
-    Ok(loops)
+    loops
 }
 
 /// The longest run of consecutive vertices of the cyclic `loop_` that satisfy `on` (the whole
@@ -375,7 +426,11 @@ mod tests {
     #[test]
     fn three_fins_stitched_share_every_seam_edge_and_keep_their_orientation() {
         let (sheets, seam) = fins(3, 0.3, 1.0);
-        let (stitched, label) = stitch(&sheets, std::slice::from_ref(&seam), 0.5).unwrap();
+        let Stitch {
+            sheet: stitched,
+            sheet_of_point: label,
+            ..
+        } = stitch(&sheets, std::slice::from_ref(&seam), 0.5).unwrap();
         assert_eq!(label.len(), stitched.points().len());
         check_stitched(&stitched, &seam);
         // No vertex within the cut of the seam but the seam's, and the result inflates.
@@ -390,7 +445,11 @@ mod tests {
         // A seam of radius 2.6: the cut at 4.16 mm leaves each fin's two outer rows (4.76 and
         // 5.63 mm out), whose cut edges are free until zipped.
         let (sheets, seam) = fins(4, 1.3, 2.6);
-        let (stitched, label) = stitch(&sheets, std::slice::from_ref(&seam), 0.5).unwrap();
+        let Stitch {
+            sheet: stitched,
+            sheet_of_point: label,
+            ..
+        } = stitch(&sheets, std::slice::from_ref(&seam), 0.5).unwrap();
         assert_eq!(label.len(), stitched.points().len());
         check_stitched(&stitched, &seam);
         let kept: usize = (sheets.iter())
@@ -402,6 +461,66 @@ mod tests {
             })
             .sum();
         assert_eq!(stitched.points().len(), seam.points.len() + kept);
+    }
+
+    #[test]
+    fn a_piece_of_seam_no_sheet_reaches_is_dropped_and_the_rest_stitched() {
+        // A second seam just past the first's end, beyond the fins: every cut vertex is
+        // nearer the first, so no sheet runs along the second (a ring of insertion lines
+        // found in two pieces).
+        let (sheets, seam) = fins(3, 0.3, 1.0);
+        let end = seam.points[seam.points.len() - 1];
+        let piece = Seam {
+            points: vec![
+                end + Vec3::new(0.0, 0.0, 0.5),
+                end + Vec3::new(0.0, 0.0, 1.0),
+            ],
+            radius: vec![1.0; 2],
+        };
+        let stitched = stitch(&sheets, &[seam.clone(), piece.clone()], 0.5).unwrap();
+        assert_eq!(stitched.seams.len(), 1);
+        assert_eq!(stitched.seams[0].points, seam.points);
+        check_stitched(&stitched.sheet, &seam);
+        // A seam alone that no sheet reaches is an error.
+        let e = stitch(&sheets, &[piece], 0.5).unwrap_err().to_string();
+        assert!(e.contains("no medial sheet reaches the seam"), "{e}");
+    }
+
+    #[test]
+    fn a_vertex_the_cut_leaves_pinched_is_dropped_too() {
+        // A 5 × 5 grid of 1 mm squares, each split along its (i, j)–(i+1, j+1) diagonal; two
+        // short seams at the centre vertex's neighbours (1, 2) and (3, 2) cut those off, which
+        // leaves the centre's triangles two fans meeting only at it.
+        let at = |i: usize, j: usize| 5 * j + i;
+        let points: Vec<Vec3> = (0..25)
+            .map(|v| Vec3::new((v % 5) as f64, (v / 5) as f64, 0.0))
+            .collect();
+        let triangles: Vec<[usize; 3]> = (0..4)
+            .flat_map(|j| (0..4).map(move |i| (i, j)))
+            .flat_map(|(i, j)| {
+                let [a, b, c, d] = [at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1)];
+                [[a, b, c], [a, c, d]]
+            })
+            .collect();
+        let sheet = MedialSheet::new(points, triangles, vec![1.0; 25]).unwrap();
+        let seam_at = |i: usize, j: usize| Seam {
+            points: vec![
+                Vec3::new(i as f64, j as f64, -0.1),
+                Vec3::new(i as f64, j as f64, 0.1),
+            ],
+            radius: vec![0.1; 2],
+        };
+        let seams = [seam_at(1, 2), seam_at(3, 2)];
+        let cut = CutSheet::new(&sheet, &seams, 0.5);
+        for v in [at(1, 2), at(3, 2), at(2, 2)] {
+            assert!(!cut.used.contains(&v), "vertex {v} is kept");
+        }
+        assert!(pinched(&free_edges(&cut.triangles)).is_empty());
+        // Every kept vertex is on one loop once.
+        let on_loops: usize = cut.loops.iter().map(Vec::len).sum();
+        let free_vertices: HashSet<usize> = cut.loops.iter().flatten().copied().collect();
+        assert_eq!(on_loops, free_vertices.len());
+        assert_eq!(cut.used.len(), 25 - 3);
     }
 
     /// Every seam edge of `stitched` (along `seam`, its first vertices) is in exactly three
