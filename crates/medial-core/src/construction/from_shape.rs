@@ -403,16 +403,18 @@ pub fn template_of_shape(
         built.figures.sampled_again = Some(again(sampling, not_kept));
         return Ok(built.with(mask));
     }
-    let tried: Vec<String> = not_kept.iter().map(|n| n.sampling.clone()).collect();
     match first {
         Ok(mut built) => {
             built.figures.sampled_again = Some(again(options.sampling, not_kept));
             Ok(built.with(mask))
         }
-        Err(Error::InvalidTemplate(e)) => Err(Error::InvalidTemplate(format!(
-            "{e}; built again from {}, none was sound",
-            tried.join(" and ")
-        ))),
+        Err(Error::InvalidTemplate(e)) => {
+            let tried: Vec<&str> = not_kept.iter().map(|n| &n.sampling[..]).collect();
+            Err(Error::InvalidTemplate(format!(
+                "{e}; built again from {}, none was sound",
+                tried.join(" and ")
+            )))
+        }
         Err(e) => Err(e),
     }
 }

@@ -296,16 +296,11 @@ fn branches_bridged(non_flat: &NonFlat, voxel: f64, bridges: &[(Vec3, f64)]) -> 
         .map(|(&seam, pieces)| (seam, pieces.iter().map(|&p| slot(p)).collect()))
         .collect();
     lines.sort_unstable();
-    // Seams first, ascending: lines that three or more pieces reach.
-    let seam_numbers: Vec<usize> = (lines.iter())
+    // Seams first, ascending: lines that three or more pieces reach, with those pieces.
+    let (seam_numbers, at_seams): (Vec<usize>, Vec<&[usize]>) = (lines.iter())
         .filter(|(seam, pieces)| pieces.len() >= 3 && a_line(*seam))
-        .map(|(seam, _)| *seam)
-        .collect();
-    // The slots of the pieces that reach each seam.
-    let at_seams: Vec<&[usize]> = (lines.iter())
-        .filter(|(seam, _)| seam_numbers.contains(seam))
-        .map(|(_, pieces)| &pieces[..])
-        .collect();
+        .map(|(seam, pieces)| (*seam, &pieces[..]))
+        .unzip();
     let mut two_sided = Vec::new();
     for (seam, pieces) in &lines {
         if let [a, b] = pieces[..] {
