@@ -490,16 +490,28 @@ fn built_at(
     loop {
         let (initial, inflated_sheet) =
             inflated(fine, &subdivided, &mut put_back).map_err(|e| {
-                match Fold::of(&found.sheet) {
-                    Some(fold) => Error::InvalidTemplate(format!(
-                "the medial sheet folds by up to {:.0}° between neighbouring triangles at {} \
-                 edges, the sharpest near ({:.1}, {:.1}, {:.1}) mm: the shape probably \
-                 branches there (sheets meeting at a seam that was not found; {} seams \
-                 found), and a folded sheet cannot be inflated ({e})",
-                fold.max_deg, fold.edges, fold.at.x, fold.at.y, fold.at.z, found.seams.len()
-            )),
-                    None => e,
-                }
+                let Some(fold) = Fold::of(&found.sheet, &found.sheet_of_point) else {
+                    return e;
+                };
+                let cause = match e {
+                    Error::InvalidTemplate(cause) => cause,
+                    e => e.to_string(),
+                };
+                let why = if fold.in_band {
+                    "in the band stitched between a sheet's cut and a seam".to_string()
+                } else {
+                    format!(
+                        "where the shape probably branches (sheets meeting at a seam that was \
+                         not found; {} seams found)",
+                        found.seams.len()
+                    )
+                };
+                Error::InvalidTemplate(format!(
+                    "the medial sheet folds by up to {:.0}° between neighbouring triangles at \
+                     {} edges, the sharpest near ({:.1}, {:.1}, {:.1}) mm, {why}; a folded \
+                     sheet cannot be inflated: {cause}",
+                    fold.max_deg, fold.edges, fold.at.x, fold.at.y, fold.at.z
+                ))
             })?;
         let dice_before_fit = voxel_dice(&initial.boundary_mesh()?, mask)?;
         let (fitted, fit_stopped_early) = if options.fit {
@@ -771,18 +783,20 @@ fn voxel_within(shape: &Shape, h: f64, memory: MemoryLimit) -> Result<f64> {
 pub const SHEET_FOLD_DEG: f64 = 60.0;
 
 /// The folds of a sheet past [`SHEET_FOLD_DEG`]: how many interior edges (in exactly two
-/// triangles; a seam's edges are in three), the largest angle, and the middle of its edge.
+/// triangles; a seam's edges are in three), the largest angle, the middle of its edge, and
+/// whether that edge is in a seam's band (one of its triangles has a corner on a seam).
 struct Fold {
     edges: usize,
     max_deg: f64,
     at: Vec3,
+    in_band: bool,
 }
 
 impl Fold {
     /// The folds of `sheet`, none when no edge passes the bound. Triangles of one edge are
     /// compared as consistently oriented (the normal of one flipped when both run the edge the
-    /// same way).
-    fn of(sheet: &MedialSheet) -> Option<Self> {
+    /// same way). `sheet_of_point` is `None` at the points on a seam.
+    fn of(sheet: &MedialSheet, sheet_of_point: &[Option<usize>]) -> Option<Self> {
         let (p, tris) = (sheet.points(), sheet.triangles());
         let normal = |t: &[usize; 3]| (p[t[1]] - p[t[0]]).cross(&(p[t[2]] - p[t[0]]));
         let mut by_edge: std::collections::HashMap<(usize, usize), Vec<(usize, bool)>> =
@@ -796,7 +810,8 @@ impl Fold {
                     .push((f, a < b));
             }
         }
-        let (mut count, mut worst) = (0, None::<(f64, Vec3)>);
+        let (mut count, mut worst) = (0, None::<(f64, Vec3, bool)>);
+        let on_seam = |t: &[usize; 3]| t.iter().any(|&v| sheet_of_point[v].is_none());
         let mut edges: Vec<_> = by_edge.into_iter().collect();
         edges.sort_unstable_by_key(|(e, _)| *e);
         for ((a, b), faces) in edges {
@@ -811,14 +826,16 @@ impl Fold {
                 continue;
             }
             count += 1;
-            if worst.map_or(true, |(w, _)| angle > w) {
-                worst = Some((angle, (p[a] + p[b]) / 2.0));
+            if worst.map_or(true, |(w, ..)| angle > w) {
+                let in_band = on_seam(&tris[f]) || on_seam(&tris[g]);
+                worst = Some((angle, (p[a] + p[b]) / 2.0, in_band));
             }
         }
-        worst.map(|(max_deg, at)| Self {
+        worst.map(|(max_deg, at, in_band)| Self {
             edges: count,
             max_deg,
             at,
+            in_band,
         })
     }
 }
@@ -1078,12 +1095,22 @@ mod tests {
 
     #[test]
     fn a_crease_past_the_fold_bound_is_found_and_a_gentle_bend_is_not() {
-        assert!(Fold::of(&creased(0.0)).is_none());
-        assert!(Fold::of(&creased(50.0)).is_none());
-        let fold = Fold::of(&creased(120.0)).expect("a fold of 120°");
+        let one_sheet = [Some(0); 6];
+        assert!(Fold::of(&creased(0.0), &one_sheet).is_none());
+        assert!(Fold::of(&creased(50.0), &one_sheet).is_none());
+        let fold = Fold::of(&creased(120.0), &one_sheet).expect("a fold of 120°");
         assert_eq!(fold.edges, 1);
         assert!((fold.max_deg - 120.0).abs() < 1e-9, "{}", fold.max_deg);
         assert!((fold.at - Vec3::new(1.0, 0.5, 0.0)).norm() < 1e-12);
+        assert!(!fold.in_band);
+        // The same crease where a triangle at it has a corner on a seam: in the band; a seam
+        // corner of a triangle away from it does not make it so.
+        let mut seam_at_4 = one_sheet;
+        seam_at_4[4] = None;
+        assert!(Fold::of(&creased(120.0), &seam_at_4).unwrap().in_band);
+        let mut seam_at_0 = one_sheet;
+        seam_at_0[0] = None;
+        assert!(!Fold::of(&creased(120.0), &seam_at_0).unwrap().in_band);
     }
 
     fn figures(sound: [bool; 3], angle: f64, mismatch: f64) -> TemplateFigures {
