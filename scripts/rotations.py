@@ -18,14 +18,13 @@ Decision 0412 lists the sets measured with it (the biv-me heart).
 
 import argparse
 import gzip
-import json
 import math
 import os
 import random
 import struct
-import subprocess
 import sys
-import time
+
+from template_case import build
 
 
 def read_nifti(path):
@@ -156,24 +155,10 @@ def main():
         shape = os.path.join(args.out, f"{name}.nii.gz")
         with gzip.open(shape, "wb") as f:
             f.write(rotated(data, order, rotation(axis, angle)))
-        template = os.path.join(args.out, f"{name}.vtk")
-        figures_path = os.path.join(args.out, f"{name}.json")
-        if os.path.exists(figures_path):
-            os.remove(figures_path)
-        start = time.time()
-        run = subprocess.run(
-            [args.medial, "template", shape, "--out", template, "-q"],
-            capture_output=True,
-            text=True,
-        )
-        seconds = time.time() - start
+        code, seconds, figures, output = build(args.medial, shape, args.out, name)
         with open(os.path.join(args.out, f"{name}.log"), "w") as f:
-            f.write(run.stdout + run.stderr)
-        figures = {}
-        if os.path.exists(figures_path):
-            with open(figures_path) as f:
-                figures = json.load(f)
-        exits.append(run.returncode)
+            f.write(output)
+        exits.append(code)
         if "dice" in figures:
             dice.append(figures["dice"])
         cells = ["–"] * 4
@@ -187,7 +172,7 @@ def main():
             ]
         axis_text = ", ".join(f"{a:.2f}" for a in axis)
         print(
-            f"| {name} | {angle:.1f} | ({axis_text}) | {run.returncode} | "
+            f"| {name} | {angle:.1f} | ({axis_text}) | {code} | "
             f"{' | '.join(cells)} | {seconds:.0f} |"
         )
         sys.stdout.flush()

@@ -11,13 +11,12 @@ Dice, seconds. Standard library only.
 """
 
 import argparse
-import json
 import math
 import os
 import struct
-import subprocess
 import sys
-import time
+
+from template_case import build
 
 # (name, voxel mm, LV inner/outer radius, RV inner/outer radius, RV centre x, height, phase)
 CASES = [
@@ -92,26 +91,12 @@ def main():
         data, dims, first = segmentation(h, lv_in, lv_out, rv_in, rv_out, cx, height, phase)
         shape = os.path.join(args.out, f"{name}.nii")
         write_nifti(shape, data, dims, first, h)
-        template = os.path.join(args.out, f"{name}.vtk")
-        figures_path = os.path.join(args.out, f"{name}.json")
-        if os.path.exists(figures_path):
-            os.remove(figures_path)
-        start = time.time()
-        run = subprocess.run(
-            [args.medial, "template", shape, "--out", template, "-q"],
-            capture_output=True,
-            text=True,
-        )
-        seconds = time.time() - start
-        figures = {}
-        if os.path.exists(figures_path):
-            with open(figures_path) as f:
-                figures = json.load(f)
+        code, seconds, figures, _ = build(args.medial, shape, args.out, name)
         found = f"{figures.get('sheets', '–')}, {figures.get('seams', '–')}"
         dice = f"{figures['dice']:.3f}" if "dice" in figures else "–"
         print(
             f"| {name} | {h} | {lv_in} / {lv_out} | {rv_in} / {rv_out} | {cx} | "
-            f"{', '.join(str(p) for p in phase)} | {run.returncode} | {found} | {dice} | "
+            f"{', '.join(str(p) for p in phase)} | {code} | {found} | {dice} | "
             f"{seconds:.1f} |"
         )
         sys.stdout.flush()
