@@ -497,14 +497,23 @@ fn built_at(
                     Error::InvalidTemplate(cause) => cause,
                     e => e.to_string(),
                 };
+                let nearest_seam = (found.seams.iter())
+                    .flat_map(|seam| &seam.points)
+                    .map(|p| (p - fold.at).norm())
+                    .fold(f64::INFINITY, f64::min);
                 let why = if fold.in_band {
                     "in the band stitched between a sheet's cut and a seam".to_string()
-                } else {
+                } else if nearest_seam.is_finite() {
                     format!(
-                        "where the shape probably branches (sheets meeting at a seam that was \
-                         not found; {} seams found)",
+                        "inside a sheet, {nearest_seam:.0} mm from the nearest of the {} seams \
+                         found: a seam that was not found, or the sheet's lattice laid over \
+                         itself there",
                         found.seams.len()
                     )
+                } else {
+                    "where the shape probably branches (sheets meeting at a seam that was not \
+                     found)"
+                        .to_string()
                 };
                 Error::InvalidTemplate(format!(
                     "the medial sheet folds by up to {:.0}° between neighbouring triangles at \
