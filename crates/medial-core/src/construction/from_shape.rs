@@ -505,9 +505,9 @@ fn built_at(
                     "in the band stitched between a sheet's cut and a seam".to_string()
                 } else if nearest_seam.is_finite() {
                     format!(
-                        "inside a sheet, {nearest_seam:.0} mm from the nearest of the {} seams \
-                         found: a seam that was not found, or the sheet's lattice laid over \
-                         itself there",
+                        "inside a sheet, {nearest_seam:.0} mm from the nearest seam ({} found): \
+                         a seam that was not found, or the sheet's lattice laid over itself \
+                         there",
                         found.seams.len()
                     )
                 } else {
