@@ -24,7 +24,7 @@ import random
 import struct
 import sys
 
-from template_case import build
+from template_case import build, own_file
 
 
 def read_nifti(path):
@@ -153,22 +153,20 @@ def main():
         angle = draws.uniform(-args.max_angle, args.max_angle)
         name = f"r{n}"
         shape = os.path.join(args.out, f"{name}.nii.gz")
-        with gzip.open(shape, "wb") as f:
+        with gzip.open(own_file(shape), "wb") as f:
             f.write(rotated(data, order, rotation(axis, angle)))
         code, seconds, figures, output = build(args.medial, shape, args.out, name)
-        with open(os.path.join(args.out, f"{name}.log"), "w") as f:
+        with open(own_file(os.path.join(args.out, f"{name}.log")), "w") as f:
             f.write(output)
         exits.append(code)
-        if "dice" in figures:
-            dice.append(figures["dice"])
         cells = ["–"] * 4
         if "dice" in figures:
-            again = figures.get("sampled_again") or {}
+            dice.append(figures["dice"])
             cells = [
                 f"{figures['sheets']}, {figures['seams']}",
                 str(figures["atoms"]),
                 f"{figures['dice']:.3f}",
-                again.get("kept", "first") if again else "first",
+                (figures.get("sampled_again") or {}).get("kept", "first"),
             ]
         axis_text = ", ".join(f"{a:.2f}" for a in axis)
         print(
@@ -178,11 +176,11 @@ def main():
         sys.stdout.flush()
     dice.sort()
     print()
-    print(
-        f"{exits.count(0)} of {len(exits)} exit 0; "
-        f"{sum(d >= 0.93 for d in dice)} at voxel Dice ≥ 0.93; "
-        + (f"Dice {dice[0]:.3f}–{dice[-1]:.3f}, median {dice[len(dice) // 2]:.3f}" if dice else "")
-    )
+    summary = [f"{exits.count(0)} of {len(exits)} exit 0"]
+    summary.append(f"{sum(d >= 0.93 for d in dice)} at voxel Dice ≥ 0.93")
+    if dice:
+        summary.append(f"Dice {dice[0]:.3f}–{dice[-1]:.3f}, median {dice[len(dice) // 2]:.3f}")
+    print("; ".join(summary))
 
 
 if __name__ == "__main__":

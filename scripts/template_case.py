@@ -7,7 +7,16 @@ Standard library only.
 import json
 import os
 import subprocess
+import sys
 import time
+
+
+def own_file(path):
+    """`path`, after refusing one that is a symbolic link or not a regular file: a script
+    writes only the files of its output folder, never through a link to somewhere else."""
+    if os.path.islink(path) or (os.path.exists(path) and not os.path.isfile(path)):
+        sys.exit(f"error: {path} is a link or not a regular file; refusing to write it")
+    return path
 
 
 def build(medial, shape, out, name):
@@ -16,8 +25,9 @@ def build(medial, shape, out, name):
     removed first, so that a failed run shows no figures."""
     template = os.path.join(out, f"{name}.vtk")
     figures_path = os.path.join(out, f"{name}.json")
-    if os.path.exists(figures_path):
+    if os.path.exists(own_file(figures_path)):
         os.remove(figures_path)
+    own_file(template)
     start = time.time()
     run = subprocess.run(
         [medial, "template", shape, "--out", template, "-q"], capture_output=True, text=True

@@ -16,7 +16,7 @@ import os
 import struct
 import sys
 
-from template_case import build
+from template_case import build, own_file
 
 # (name, voxel mm, LV inner/outer radius, RV inner/outer radius, RV centre x, height, phase)
 CASES = [
@@ -75,7 +75,7 @@ def write_nifti(path, data, dims, first, h):
     struct.pack_into("<4f", header, 296, 0.0, h, 0.0, first[1])
     struct.pack_into("<4f", header, 312, 0.0, 0.0, h, first[2])
     header[344:348] = b"n+1\0"
-    with open(path, "wb") as f:
+    with open(own_file(path), "wb") as f:
         f.write(header + bytes(4) + data)
 
 

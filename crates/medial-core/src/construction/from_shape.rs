@@ -22,6 +22,7 @@ use crate::construction::inflate::{inflate, self_intersections, MedialSheet};
 use crate::construction::project::{project, ProjectOptions};
 use crate::construction::skeleton::chart::ChartKind;
 pub use crate::construction::skeleton::ridge::LEFT_OUT_LIMIT;
+use crate::construction::skeleton::seam::Seam;
 use crate::construction::skeleton::{
     medial_points, sheet_of_mask, Sampling, ShapeSheet, Subdivided, MIN_FEATURE_ANGLE_DEG,
 };
@@ -497,24 +498,7 @@ fn built_at(
                     Error::InvalidTemplate(cause) => cause,
                     e => e.to_string(),
                 };
-                let nearest_seam = (found.seams.iter())
-                    .flat_map(|seam| &seam.points)
-                    .map(|p| (p - fold.at).norm())
-                    .fold(f64::INFINITY, f64::min);
-                let why = if fold.in_band {
-                    "in the band stitched between a sheet's cut and a seam".to_string()
-                } else if nearest_seam.is_finite() {
-                    format!(
-                        "inside a sheet, {nearest_seam:.0} mm from the nearest seam ({} found): \
-                         a seam that was not found, or the sheet's lattice laid over itself \
-                         there",
-                        found.seams.len()
-                    )
-                } else {
-                    "where the shape probably branches (sheets meeting at a seam that was not \
-                     found)"
-                        .to_string()
-                };
+                let why = fold.place(&found.seams);
                 Error::InvalidTemplate(format!(
                     "the medial sheet folds by up to {:.0}° between neighbouring triangles at \
                      {} edges, the sharpest near ({:.1}, {:.1}, {:.1}) mm, {why}; a folded \
@@ -847,6 +831,28 @@ impl Fold {
             in_band,
         })
     }
+
+    /// Where the sharpest fold lies, for its error: in a seam's band, inside a sheet at its
+    /// distance from the nearest of `seams` (a missed seam or the lattice laid over itself),
+    /// or, with no seam, where the shape probably branches.
+    fn place(&self, seams: &[Seam]) -> String {
+        let nearest = (seams.iter())
+            .flat_map(|seam| &seam.points)
+            .map(|p| (p - self.at).norm())
+            .fold(f64::INFINITY, f64::min);
+        if self.in_band {
+            "in the band stitched between a sheet's cut and a seam".to_string()
+        } else if nearest.is_finite() {
+            format!(
+                "inside a sheet, {nearest:.0} mm from the nearest seam ({} found): a seam that \
+                 was not found, or the sheet's lattice laid over itself there",
+                seams.len()
+            )
+        } else {
+            "where the shape probably branches (sheets meeting at a seam that was not found)"
+                .to_string()
+        }
+    }
 }
 
 /// The subdivided sheet `fine` inflated and projected onto its constraints, with the sheet
@@ -1120,6 +1126,19 @@ mod tests {
         let mut seam_at_0 = one_sheet;
         seam_at_0[0] = None;
         assert!(!Fold::of(&creased(120.0), &seam_at_0).unwrap().in_band);
+        // The error names the place: no seam, a seam 3 mm away, the band.
+        assert!(fold.place(&[]).contains("probably branches"));
+        let seam = Seam {
+            points: vec![Vec3::new(1.0, 3.5, 0.0), Vec3::new(1.0, 9.0, 0.0)],
+            radius: vec![0.1; 2],
+        };
+        let inside = fold.place(std::slice::from_ref(&seam));
+        assert!(
+            inside.contains("inside a sheet, 3 mm from the nearest seam (1 found)"),
+            "{inside}"
+        );
+        let band = Fold::of(&creased(120.0), &seam_at_4).unwrap();
+        assert!(band.place(&[seam]).contains("in the band"));
     }
 
     fn figures(sound: [bool; 3], angle: f64, mismatch: f64) -> TemplateFigures {
