@@ -23,7 +23,7 @@
 //! | [`image`] | volumes in world space, rasterization of closed meshes, distance and feature transform | [`image::Volume`], [`image::rasterize`], [`image::distance`] |
 //! | [`fit`] | a fit as data ([`fit::FitSpec`]), the automatic plan and initial alignment, stages prepared against their targets, objective, L-BFGS, the augmented-Lagrangian schedule | [`fit::run::automatic`], [`fit::run::Fit`], [`fit::plan::automatic`], [`fit::Objective`], [`fit::run_stage`] |
 //! | [`memory`] | memory estimates of a run, checked against a limit before allocating | [`memory::Estimate`], [`memory::MemoryLimit`] |
-//! | [`construction`] | templates from a shape (the whole pipeline; its medial sheet) and from a medial sheet: inflation, projection onto the constraints | [`construction::from_shape::template_of_shape`], [`construction::sheet_of_mask`], [`construction::inflate()`], [`construction::project()`] |
+//! | [`construction`] | templates from a shape (the whole pipeline; its medial sheet) and from a medial sheet: inflation, projection onto the constraints | [`construction::from_shape::template_of_shape`], [`construction::MedialAxis`], [`construction::sheet_of_mask`], [`construction::inflate()`], [`construction::project()`] |
 //! | [`synth`] | synthetic cases with a known deformation | [`synth::SyntheticCase`], [`synth::Warp`] |
 //! | [`testing`] | the dense reference implementation and small fixtures | [`testing::dense`] |
 //!

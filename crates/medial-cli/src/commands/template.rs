@@ -6,12 +6,15 @@ use crate::error::CliError;
 use crate::memory;
 use crate::output::{model_error, print_json, write_json, write_options};
 use medial_core::construction::from_shape::{
-    template_of_shape, Shape, TemplateFigures, TemplateOptions, Verdict, DEFAULT_ATOMS,
-    LEFT_OUT_LIMIT, MAX_ANGLE_DEG, MAX_MISMATCH_PCT, TARGET_DICE,
+    template_of_shape_watched, BuildStep, Shape, TemplateFigures, TemplateOptions, Verdict,
+    DEFAULT_ATOMS, LEFT_OUT_LIMIT, MAX_ANGLE_DEG, MAX_MISMATCH_PCT, TARGET_DICE,
 };
 use medial_core::construction::Sampling;
 use medial_io::nifti_volume::{write_nifti, NiftiType};
-use medial_io::vtk::{write_polydata, DataArray, ValueType};
+use medial_io::sheet::{
+    labels, lattices_polydata, medial_axis_polydata, seams_polydata, sheet_polydata,
+};
+use medial_io::vtk::{write_polydata, WriteOptions};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -51,8 +54,13 @@ pub struct TemplateArgs {
     /// Where the figures are written as JSON [default: TEMPLATE with extension .json].
     #[arg(long, value_name = "FIGURES.json")]
     pub figures: Option<PathBuf>,
-    /// Also write the shape on the grid the sheet was found on (shape_mask.nii.gz) into this
-    /// folder: the image the template was fitted to.
+    /// Also write what the template was built from into this folder, each step as it is
+    /// taken, so that a build that fails leaves them: the shape on the grid the sheet was found
+    /// on (shape_mask.nii.gz: the image the template was fitted to), its medial points
+    /// (medial_points.vtk: point arrays Radius in mm, Sheet and Seam, −1 on none), and for
+    /// each sampling tried (a folder such as 300_atoms/) each sheet's lattice before the
+    /// stitching (lattices.vtk), the seams of a branching shape (seams.vtk) and the sheet
+    /// as inflated (sheet.vtk: Radius, and Sheet, −1 on a seam).
     #[arg(long, value_name = "DIR")]
     pub work: Option<PathBuf>,
     /// Skip the Dice fit to the shape (step 6 of docs/template.md): the projected inflation of the sheet.
@@ -142,10 +150,25 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
         voxel: args.voxel,
         fit: !args.no_fit,
     };
-    let built = template_of_shape(&shape, &options, memory::limit()).map_err(|e| match e {
+    let mut work = match &args.work {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).map_err(|e| CliError::io(dir, e))?;
+            Some(WorkFolder::new(dir, write_options(args.binary)))
+        }
+        None => None,
+    };
+    let built = template_of_shape_watched(&shape, &options, memory::limit(), &mut |step| {
+        if let Some(work) = &mut work {
+            work.write(step);
+        }
+    });
+    let built = built.map_err(|e| match e {
         medial_core::Error::Memory { .. } => CliError::from(e),
         e => model_error(&args.shape, e),
     })?;
+    if let Some(e) = work.and_then(|w| w.error) {
+        return Err(e);
+    }
     if let Some(why) = &built.fit_stopped_early {
         tracing::warn!("the fit to the shape stopped early, keeping its last sound iterate: {why}");
     }
@@ -213,19 +236,13 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
     // The template as cmrep writes it, with the sheet of each boundary point's atom (`Sheet`,
     // −1 on a seam): a wall per colour in ParaView, and per-wall figures in a study.
     let mut data = medial_io::cmrep::template_to_polydata(&built.template);
-    let sheet_of = |b: &usize| built.atom_sheet[*b].map_or(-1.0, |k| k as f64);
-    data.point_data.push(DataArray::scalars(
-        "Sheet",
-        built.template.medial_index().iter().map(sheet_of).collect(),
-        ValueType::Int,
-    ));
+    let sheet_of: Vec<_> = (built.template.medial_index().iter())
+        .map(|&b| built.atom_sheet[b])
+        .collect();
+    data.point_data.push(labels("Sheet", &sheet_of));
     write_polydata(&args.out, &data, write_options(args.binary))?;
     if let Some(path) = &args.sheet {
         medial_io::sheet::write_sheet(path, &built.found.sheet, write_options(args.binary))?;
-    }
-    if let Some(dir) = &args.work {
-        std::fs::create_dir_all(dir).map_err(|e| CliError::io(dir, e))?;
-        write_nifti(&dir.join("shape_mask.nii.gz"), &built.mask, NiftiType::U8)?;
     }
     let printed = Printed {
         shape: &args.shape,
@@ -240,6 +257,63 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
     write_json(&path, &printed)?;
     print_json(&printed)?;
     verdict(&args.out, &built.figures)
+}
+
+/// `--work`: the steps of the build ([`BuildStep`]) written into a folder as they are taken,
+/// the first error kept (the build goes on; the command reports it after the build's own).
+struct WorkFolder<'a> {
+    dir: &'a Path,
+    options: WriteOptions,
+    error: Option<CliError>,
+}
+
+impl<'a> WorkFolder<'a> {
+    fn new(dir: &'a Path, options: WriteOptions) -> Self {
+        Self {
+            dir,
+            options,
+            error: None,
+        }
+    }
+
+    /// Writes `step` unless an earlier step failed to be written.
+    fn write(&mut self, step: BuildStep<'_>) {
+        if self.error.is_none() {
+            self.error = self.written(step).err();
+        }
+    }
+
+    fn written(&self, step: BuildStep<'_>) -> Result<(), CliError> {
+        match step {
+            BuildStep::Mask(mask) => {
+                write_nifti(&self.dir.join("shape_mask.nii.gz"), mask, NiftiType::U8)?
+            }
+            BuildStep::MedialAxis(axis) => write_polydata(
+                &self.dir.join("medial_points.vtk"),
+                &medial_axis_polydata(axis),
+                self.options,
+            )?,
+            BuildStep::Sheet(sampling, found) => {
+                let dir = self.dir.join(match sampling {
+                    Sampling::Atoms(n) => format!("{n}_atoms"),
+                    Sampling::Spacing(s) => format!("spacing_{s:.3}_mm"),
+                });
+                std::fs::create_dir_all(&dir).map_err(|e| CliError::io(&dir, e))?;
+                let lattices = lattices_polydata(&found.lattices);
+                write_polydata(&dir.join("lattices.vtk"), &lattices, self.options)?;
+                if !found.seams.is_empty() {
+                    let seams = seams_polydata(&found.seams);
+                    write_polydata(&dir.join("seams.vtk"), &seams, self.options)?;
+                }
+                let mut sheet = sheet_polydata(&found.sheet);
+                sheet
+                    .point_data
+                    .push(labels("Sheet", &found.sheet_of_point));
+                write_polydata(&dir.join("sheet.vtk"), &sheet, self.options)?;
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The exit of `medial template` by the figures' verdict ([`TemplateFigures::verdict`]): an

@@ -139,6 +139,7 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
     for (name, shape) in shapes {
         let out = dir.path().join(format!("{name}.vtk"));
         let sheet = dir.path().join(format!("{name}_sheet.vtk"));
+        let work = dir.path().join(format!("{name}_work"));
         let figures = run_json(&[
             "template",
             s(&shape),
@@ -146,6 +147,8 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
             s(&out),
             "--sheet",
             s(&sheet),
+            "--work",
+            s(&work),
             "-q",
         ]);
         eprintln!("toy {name}: {figures:#}");
@@ -209,7 +212,90 @@ fn a_template_of_the_toy_has_its_three_sheets_stitched_at_its_seam() {
         let seam_edges = edges.values().filter(|&&n| n == 3).count();
         assert!(seam_edges >= 4, "{seam_edges} seam edges");
         assert!(edges.values().all(|&n| n <= 3));
+        assert_work_folder(&work, &figures, &sheet);
     }
+}
+
+/// What `--work` wrote for a toy built at once from 300 atoms: its medial points on three
+/// sheets and one seam, the three sheets' lattices, the seam's polyline, and the stitched sheet
+/// (the one `--sheet` wrote, labelled by sheet, −1 on the seam).
+fn assert_work_folder(work: &Path, figures: &Value, sheet_written: &MedialSheet) {
+    let labels = |path: &Path, name: &str| -> std::collections::BTreeSet<i64> {
+        let data = medial_io::vtk::read_polydata(path).unwrap();
+        let array = data
+            .point_array_ci(name)
+            .unwrap_or_else(|| panic!("{name} in {path:?}"));
+        assert_eq!(array.values.len(), data.points.len());
+        array.values.iter().map(|&v| v as i64).collect()
+    };
+    assert!(read_nifti(&work.join("shape_mask.nii.gz")).is_ok());
+    let points = work.join("medial_points.vtk");
+    let data = medial_io::vtk::read_polydata(&points).unwrap();
+    assert_eq!(
+        data.points.len() as u64,
+        figures["medial_points"].as_u64().unwrap()
+    );
+    assert_eq!(labels(&points, "Sheet"), [-1, 0, 1, 2].into());
+    assert_eq!(labels(&points, "Seam"), [-1, 0].into());
+    let sampling = work.join("300_atoms");
+    assert_eq!(
+        labels(&sampling.join("lattices.vtk"), "Sheet"),
+        [0, 1, 2].into()
+    );
+    let seams = medial_io::vtk::read_polydata(&sampling.join("seams.vtk")).unwrap();
+    assert_eq!(seams.lines.len(), 1);
+    let stitched = medial_io::vtk::read_polydata(&sampling.join("sheet.vtk")).unwrap();
+    assert_eq!(stitched.points, sheet_written.points());
+    assert_eq!(
+        labels(&sampling.join("sheet.vtk"), "Sheet"),
+        [-1, 0, 1, 2].into()
+    );
+}
+
+/// A build that fails after finding the medial points (four sheets meeting at one seam, which
+/// no medial template can hold) leaves them in `--work`: the mask and the medial points, with
+/// the four sheets and the seam that made it fail.
+#[test]
+fn a_failed_build_leaves_what_it_found_in_the_work_folder() {
+    let dir = tempfile::tempdir().unwrap();
+    // Two slabs 3 mm thick crossing at right angles, extruded: an X in cross-section.
+    let dims = [60, 60, 40];
+    let inside = |i: usize, j: usize, k: usize| {
+        let slab = |u: usize, v: usize| (27..33).contains(&u) && (8..52).contains(&v);
+        (5..35).contains(&k) && (slab(i, j) || slab(j, i))
+    };
+    let mut data = Vec::new();
+    for k in 0..dims[2] {
+        for j in 0..dims[1] {
+            for i in 0..dims[0] {
+                data.push(if inside(i, j, k) { 1.0 } else { 0.0 });
+            }
+        }
+    }
+    let affine = nalgebra::Matrix4::new_nonuniform_scaling(&Vec3::repeat(0.5));
+    let cross = dir.path().join("cross.nii.gz");
+    write_nifti(
+        &cross,
+        &Volume::new(dims, data, affine).unwrap(),
+        NiftiType::U8,
+    )
+    .unwrap();
+    let work = dir.path().join("work");
+    let out = dir.path().join("t.vtk");
+    one_line_error(
+        &["template", s(&cross), "--out", s(&out), "--work", s(&work)],
+        1,
+        &["4 triangles"],
+    );
+    assert!(!out.exists());
+    assert!(read_nifti(&work.join("shape_mask.nii.gz")).is_ok());
+    let points = medial_io::vtk::read_polydata(&work.join("medial_points.vtk")).unwrap();
+    let label_set = |name: &str| -> std::collections::BTreeSet<i64> {
+        let array = points.point_array_ci(name).unwrap();
+        array.values.iter().map(|&v| v as i64).collect()
+    };
+    assert_eq!(label_set("Sheet"), [-1, 0, 1, 2, 3].into());
+    assert_eq!(label_set("Seam"), [-1, 0].into());
 }
 
 /// biv-me's template heart (a real two-ventricle myocardium, 1 mm): three sheets meeting along

@@ -2,7 +2,8 @@
 //! one by hand, automatically (docs/method.md §9.3):
 //! 1. the shape as a mask on a grid fine enough for its thinnest wall (a third of the 10th
 //!    percentile of the half thicknesses found on a first, coarser grid);
-//! 2. its medial sheet with a radius per vertex ([`sheet_of_mask`]);
+//! 2. its medial points, the sheets and seams they form ([`MedialAxis`]), and its medial sheet
+//!    with a radius per vertex ([`MedialAxis::sheet`]);
 //! 3. one Loop subdivision, inflation and projection onto the medial constraints;
 //! 4. the constrained Dice fit of that template to the mask itself (the automatic fit's plan
 //!    and initial alignment, [`crate::fit::run::automatic`], with its own shorter μ schedule,
@@ -24,7 +25,7 @@ use crate::construction::skeleton::chart::ChartKind;
 pub use crate::construction::skeleton::ridge::LEFT_OUT_LIMIT;
 use crate::construction::skeleton::seam::Seam;
 use crate::construction::skeleton::{
-    medial_points, sheet_of_mask, Sampling, ShapeSheet, Subdivided, MIN_FEATURE_ANGLE_DEG,
+    medial_points, MedialAxis, Sampling, ShapeSheet, Subdivided, MIN_FEATURE_ANGLE_DEG,
 };
 use crate::fit::augmented_lagrangian::CoarseTime;
 use crate::fit::guard::Guard;
@@ -171,8 +172,6 @@ pub struct BuiltTemplate {
     pub template: MedialTemplate,
     /// The medial sheet found, with how it was sampled.
     pub found: ShapeSheet,
-    /// The shape on the grid the sheet was found on.
-    pub mask: Volume,
     /// Its figures.
     pub figures: TemplateFigures,
     /// A fit to the shape that stopped where the model would fold: its last sound iterate was
@@ -340,14 +339,45 @@ pub fn template_of_shape(
     options: &TemplateOptions,
     memory: MemoryLimit,
 ) -> Result<BuiltTemplate> {
+    template_of_shape_watched(shape, options, memory, &mut |_| {})
+}
+
+/// A step of [`template_of_shape`] a caller can look at as it is taken
+/// ([`template_of_shape_watched`]), whether or not a template comes of it: what the medial
+/// sheet was built from, to see in a viewer why a template folds or misses a wall.
+#[derive(Clone, Copy, Debug)]
+pub enum BuildStep<'a> {
+    /// The shape on the grid its medial sheet is found on (step 1).
+    Mask(&'a Volume),
+    /// The shape's medial points, with the sheets and seams they form (step 2; found once,
+    /// shared by every sampling).
+    MedialAxis(&'a MedialAxis),
+    /// The medial sheet at one sampling (each sheet's lattice, the seams, the stitched sheet),
+    /// before it is subdivided and inflated: once per sampling tried.
+    Sheet(Sampling, &'a ShapeSheet),
+}
+
+/// [`template_of_shape`], calling `watch` at each [`BuildStep`] as it is taken (before the
+/// steps after it, which may fail): `medial template --work` writes them.
+pub fn template_of_shape_watched(
+    shape: &Shape,
+    options: &TemplateOptions,
+    memory: MemoryLimit,
+    watch: &mut dyn FnMut(BuildStep<'_>),
+) -> Result<BuiltTemplate> {
     shape.bounds()?;
     let (mask, voxel, wanted) = fine_mask(shape, options.voxel, memory)?;
-    let build = |sampling: Sampling| {
+    watch(BuildStep::Mask(&mask));
+    let axis = MedialAxis::of_mask(&mask)?;
+    watch(BuildStep::MedialAxis(&axis));
+    let mut build = |sampling: Sampling| {
+        let found = axis.sheet(sampling)?;
+        watch(BuildStep::Sheet(sampling, &found));
         let options = TemplateOptions {
             sampling,
             ..*options
         };
-        built_at(shape, &mask, (voxel, wanted), &options, memory)
+        built_at(shape, &mask, found, (voxel, wanted), &options, memory)
     };
     let first = build(options.sampling);
     // What twice the atoms may mend, and the Dice to beat where the first template is sound.
@@ -361,10 +391,10 @@ pub fn template_of_shape(
                 ),
                 Some(built.figures.dice),
             ),
-            _ => return first.map(|built| built.with(mask)),
+            _ => return first,
         },
         Err(Error::InvalidTemplate(e)) => (e.clone(), None),
-        Err(_) => return first.map(|built| built.with(mask)),
+        Err(_) => return first,
     };
     // Finer until one is sound: kept if it betters a sound first.
     let again = |kept: Sampling, not_kept: Vec<NotKept>| SampledAgain {
@@ -402,12 +432,12 @@ pub fn template_of_shape(
             break;
         }
         built.figures.sampled_again = Some(again(sampling, not_kept));
-        return Ok(built.with(mask));
+        return Ok(built);
     }
     match first {
         Ok(mut built) => {
             built.figures.sampled_again = Some(again(options.sampling, not_kept));
-            Ok(built.with(mask))
+            Ok(built)
         }
         Err(Error::InvalidTemplate(e)) => {
             let tried: Vec<&str> = not_kept.iter().map(|n| &n.sampling[..]).collect();
@@ -449,41 +479,18 @@ pub struct NotKept {
     pub why: String,
 }
 
-/// A template built at one sampling ([`built_at`]), its shape's mask kept by the caller.
-struct Attempt {
-    template: MedialTemplate,
-    found: ShapeSheet,
-    figures: TemplateFigures,
-    fit_stopped_early: Option<String>,
-    atom_sheet: Vec<Option<usize>>,
-}
-
-impl Attempt {
-    /// The built template, with the mask it was built from.
-    fn with(self, mask: Volume) -> BuiltTemplate {
-        BuiltTemplate {
-            template: self.template,
-            found: self.found,
-            mask,
-            figures: self.figures,
-            fit_stopped_early: self.fit_stopped_early,
-            atom_sheet: self.atom_sheet,
-        }
-    }
-}
-
-/// [`template_of_shape`] at one sampling: the sheet of `mask` (the shape on the grid of voxel
-/// `voxel`, mm; `wanted` the voxel the thinnest wall asked for, where coarser) at
+/// [`template_of_shape`] at one sampling: the sheet `found` of `mask` (the shape on the grid of
+/// voxel `voxel`, mm; `wanted` the voxel the thinnest wall asked for, where coarser) at
 /// `options.sampling`, subdivided, inflated, fitted to the shape (`options.fit`), projected,
 /// and mended where its boundary intersects itself.
 fn built_at(
     shape: &Shape,
     mask: &Volume,
+    found: ShapeSheet,
     (voxel, wanted): (f64, Option<f64>),
     options: &TemplateOptions,
     memory: MemoryLimit,
-) -> Result<Attempt> {
-    let found = sheet_of_mask(mask, options.sampling)?;
+) -> Result<BuiltTemplate> {
     let subdivided = found.subdivided()?;
     let mut fine = subdivided.sheet.clone();
     let mut put_back = BTreeSet::new();
@@ -541,7 +548,7 @@ fn built_at(
                 band_put_back: put_back.into_iter().collect(),
                 ..figures
             };
-            return Ok(Attempt {
+            return Ok(BuiltTemplate {
                 atom_sheet: found.sheet.subdivided_labels(&found.sheet_of_point),
                 template,
                 found,

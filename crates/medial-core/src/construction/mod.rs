@@ -10,4 +10,4 @@ pub mod skeleton;
 
 pub use inflate::{inflate, Inflated, MedialSheet};
 pub use project::{project, ProjectOptions, Projection};
-pub use skeleton::{sheet_of_mask, Sampling, ShapeSheet};
+pub use skeleton::{sheet_of_mask, MedialAxis, Sampling, ShapeSheet};

@@ -114,6 +114,9 @@ const REACH_SPACINGS: f64 = 2.0;
 /// How one sheet of a [`ShapeSheet`] was sampled.
 #[derive(Clone, Debug)]
 pub struct SheetLattice {
+    /// The sheet as sampled on the lattice, before a branching shape's sheets are cut and
+    /// stitched along their seams (for one sheet, [`ShapeSheet::sheet`]).
+    pub sheet: MedialSheet,
     /// The chart the sheet was sampled in.
     pub chart: Chart,
     /// Rows of the lattice hexagon either side of its middle row ([`Lattice::new`]).
@@ -132,8 +135,8 @@ pub struct ShapeSheet {
     /// The medial points found (after dropping islands).
     pub medial_points: Vec<MedialPoint>,
     /// The share of the medial points' summed radii that the largest dropped island held
-    /// ([`medial_pieces`]; 0 for points given to [`sheet_of_points`]): about its share of the
-    /// shape's volume left out of the sheet.
+    /// ([`MedialAxis::left_out`]): about its share of the shape's volume left out of the
+    /// sheet.
     pub left_out: f64,
     /// How many of them were kept as not on spurs (`ChartedCloud::new`), over all sheets.
     pub spur_free_points: usize,
@@ -240,60 +243,94 @@ impl Subdivided {
     }
 }
 
-/// The medial sheet of the shape `mask` (voxels > ½ inside, on a grid with orthogonal axes and
-/// a background border), sampled as `sampling` says (see the module documentation).
-///
-/// A shape of one sheet gets one lattice sheet. A branching shape (sheets meeting at seams,
-/// [`branching()`]) gets one per sheet, each on the sheet's medial points and those of the
-/// seams it reaches, and the seams as polylines ([`Seam::fit`]) sampled as finely as the
-/// sheets' lattices (their mean spacing); the sheets are stitched along them ([`stitch()`]).
-///
-/// Errors: those of [`medial_pieces`]; [`Error::Branching`] for a shape of several sheets
-/// without seams; those of [`Chart::fit`], the chart's region and its harmonic map,
-/// `lattice_sheet` (a shape that is not one simply connected sheet), [`Seam::fit`] and
-/// [`stitch()`]; `InvalidParameter` for a non-positive sampling.
-pub fn sheet_of_mask(mask: &Volume, sampling: Sampling) -> Result<ShapeSheet> {
-    let (points, left_out) = medial_pieces(mask, MIN_FEATURE_ANGLE_DEG)?;
-    let found = sheet_of_points(points, mask.spacing().mean(), sampling)?;
-    Ok(ShapeSheet { left_out, ..found })
+/// The medial points of a shape with the sheets and seams they form: what every sampling of
+/// its sheet starts from ([`MedialAxis::sheet`]), found once.
+#[derive(Clone, Debug)]
+pub struct MedialAxis {
+    /// The medial points (after dropping islands).
+    pub points: Vec<MedialPoint>,
+    /// The share of the medial points' summed radii that the largest dropped island held
+    /// ([`medial_pieces`]; 0 for points given to [`MedialAxis::of_points`]).
+    pub left_out: f64,
+    /// The mean voxel of the mask they were found on, mm.
+    pub voxel: f64,
+    /// Which sheet or seam each point is on ([`branching()`]).
+    pub branches: Branches,
 }
 
-/// The medial sheet through the medial points `points` of a mask of mean voxel `voxel` (mm),
-/// sampled as `sampling` says: [`sheet_of_mask`] after its first step.
+impl MedialAxis {
+    /// The medial points of the shape `mask` (voxels > ½ inside, on a grid with orthogonal axes
+    /// and a background border) and their branching (steps 1–2 of the module documentation).
+    ///
+    /// Errors: those of [`medial_pieces`].
+    pub fn of_mask(mask: &Volume) -> Result<Self> {
+        let (points, left_out) = medial_pieces(mask, MIN_FEATURE_ANGLE_DEG)?;
+        Ok(Self {
+            left_out,
+            ..Self::of_points(points, mask.spacing().mean())
+        })
+    }
+
+    /// The medial points `points` of a mask of mean voxel `voxel` (mm) and their branching.
+    pub fn of_points(points: Vec<MedialPoint>, voxel: f64) -> Self {
+        let branches = branching(&points, voxel);
+        Self {
+            points,
+            left_out: 0.0,
+            voxel,
+            branches,
+        }
+    }
+
+    /// The medial sheet through the points, sampled as `sampling` says (see the module
+    /// documentation).
+    ///
+    /// A shape of one sheet gets one lattice sheet. A branching shape (sheets meeting at seams,
+    /// [`branching()`]) gets one per sheet, each on the sheet's medial points and those of the
+    /// seams it reaches, and the seams as polylines ([`Seam::fit`]) sampled as finely as the
+    /// sheets' lattices (their mean spacing); the sheets are stitched along them ([`stitch()`]).
+    ///
+    /// Errors: [`Error::Branching`] for a shape of several sheets without seams; those of
+    /// [`Chart::fit`], the chart's region and its harmonic map, `lattice_sheet` (a shape that
+    /// is not one simply connected sheet), [`Seam::fit`] and [`stitch()`]; `InvalidParameter`
+    /// for a non-positive sampling.
+    pub fn sheet(&self, sampling: Sampling) -> Result<ShapeSheet> {
+        let counts = self.branches.counts;
+        if counts.seams > 0 {
+            return several_sheets(self, sampling);
+        }
+        if counts.sheets != 1 {
+            return Err(Error::Branching {
+                sheets: counts.sheets,
+                seams: counts.seams,
+            });
+        }
+        let charted = ChartedSheet::new(self.points.clone(), self.voxel)?;
+        let first = &charted.first;
+        let (rings, stretch) = lattice_of(sampling, first.area(), first.elongation())?;
+        let built = charted.sampled(rings, stretch)?;
+        Ok(ShapeSheet {
+            sheet_of_point: vec![Some(0); built.lattice.sheet.points().len()],
+            sheet: built.lattice.sheet.clone(),
+            spur_free_points: built.fit.cloud().len(),
+            medial_points: self.points.clone(),
+            left_out: self.left_out,
+            lattices: vec![built.lattice],
+            border: built.border,
+            seams: Vec::new(),
+            branching: counts,
+            fits: vec![built.fit],
+        })
+    }
+}
+
+/// The medial sheet of the shape `mask`, sampled as `sampling` says: [`MedialAxis::of_mask`]
+/// then [`MedialAxis::sheet`] (one call builds the axis again for each sampling; keep the
+/// [`MedialAxis`] to sample it several times).
 ///
-/// Errors: those of [`sheet_of_mask`] but [`medial_pieces`]'.
-pub fn sheet_of_points(
-    points: Vec<MedialPoint>,
-    voxel: f64,
-    sampling: Sampling,
-) -> Result<ShapeSheet> {
-    let branches = branching(&points, voxel);
-    let counts = branches.counts;
-    if counts.seams > 0 {
-        return several_sheets(points, &branches, voxel, sampling);
-    }
-    if counts.sheets != 1 {
-        return Err(Error::Branching {
-            sheets: counts.sheets,
-            seams: counts.seams,
-        });
-    }
-    let charted = ChartedSheet::new(points.clone(), voxel)?;
-    let first = &charted.first;
-    let (rings, stretch) = lattice_of(sampling, first.area(), first.elongation())?;
-    let built = charted.sampled(rings, stretch)?;
-    Ok(ShapeSheet {
-        sheet_of_point: vec![Some(0); built.sheet.points().len()],
-        sheet: built.sheet,
-        spur_free_points: built.fit.cloud().len(),
-        medial_points: points,
-        left_out: 0.0,
-        lattices: vec![built.lattice],
-        border: built.border,
-        seams: Vec::new(),
-        branching: counts,
-        fits: vec![built.fit],
-    })
+/// Errors: those of both.
+pub fn sheet_of_mask(mask: &Volume, sampling: Sampling) -> Result<ShapeSheet> {
+    MedialAxis::of_mask(mask)?.sheet(sampling)
 }
 
 /// The stitched sheet of a branching shape (see [`sheet_of_mask`]): the atoms asked for
@@ -304,12 +341,8 @@ pub fn sheet_of_points(
 /// `s·√(a/n)` while its atoms after subdivision `a` are more than [`COUNT_SLACK`] off `n` (a
 /// sheet's lattice has whole rings, and the cut along a seam drops a band of them), and the
 /// sampling nearest `n` in ratio is kept.
-fn several_sheets(
-    points: Vec<MedialPoint>,
-    branches: &Branches,
-    voxel: f64,
-    sampling: Sampling,
-) -> Result<ShapeSheet> {
+fn several_sheets(axis: &MedialAxis, sampling: Sampling) -> Result<ShapeSheet> {
+    let (points, branches, voxel) = (&axis.points, &axis.branches, axis.voxel);
     let of =
         |indices: &[usize]| -> Vec<MedialPoint> { indices.iter().map(|&i| points[i]).collect() };
     let counts = branches.counts;
@@ -357,8 +390,8 @@ fn several_sheets(
         border: free_edge_points(&stitched.sheet),
         sheet: stitched.sheet,
         spur_free_points: built.iter().map(|b| b.fit.cloud().len()).sum(),
-        medial_points: points,
-        left_out: 0.0,
+        medial_points: points.clone(),
+        left_out: axis.left_out,
         lattices: built.iter().map(|b| b.lattice.clone()).collect(),
         fits: built.into_iter().map(|b| b.fit).collect(),
         seams: stitched.seams,
@@ -399,7 +432,7 @@ impl Stitched {
             })
             .collect::<Result<Vec<_>>>()?;
         let lattice_spacing = built.iter().map(|b| b.spacing).sum::<f64>() / built.len() as f64;
-        let sheets: Vec<MedialSheet> = built.iter().map(|b| b.sheet.clone()).collect();
+        let sheets: Vec<MedialSheet> = built.iter().map(|b| b.lattice.sheet.clone()).collect();
         let seams: Vec<Seam> = (seams.iter().zip(seam_sheets))
             .map(|(seam, on)| {
                 let along: Vec<&MedialSheet> = on.iter().map(|&k| &sheets[k]).collect();
@@ -460,7 +493,6 @@ struct ChartedSheet {
 
 /// One sheet sampled on a lattice ([`ChartedSheet::sampled`]).
 struct SampledSheet {
-    sheet: MedialSheet,
     lattice: SheetLattice,
     /// The lattice's points on its border, in order round it.
     border: Vec<usize>,
@@ -508,8 +540,8 @@ impl ChartedSheet {
         let fit = SheetFit::new(cloud, window, voxel);
         let sheet = lattice_sheet(&fit, &lattice, &in_chart)?;
         Ok(SampledSheet {
-            sheet,
             lattice: SheetLattice {
+                sheet,
                 chart: *chart,
                 rings,
                 stretch,
