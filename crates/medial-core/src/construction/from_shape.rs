@@ -21,11 +21,12 @@
 
 use crate::construction::inflate::{inflate, self_intersections, MedialSheet};
 use crate::construction::project::{project, ProjectOptions};
+use crate::construction::skeleton::branching::{flat_about, MIN_BALL_POINTS};
 use crate::construction::skeleton::chart::ChartKind;
 pub use crate::construction::skeleton::ridge::LEFT_OUT_LIMIT;
 use crate::construction::skeleton::seam::Seam;
 use crate::construction::skeleton::{
-    medial_points, MedialAxis, Sampling, ShapeSheet, Subdivided, MIN_FEATURE_ANGLE_DEG,
+    medial_points, MedialAxis, MedialPoint, Sampling, ShapeSheet, Subdivided, MIN_FEATURE_ANGLE_DEG,
 };
 use crate::fit::augmented_lagrangian::CoarseTime;
 use crate::fit::guard::Guard;
@@ -505,7 +506,7 @@ fn built_at(
                     Error::InvalidTemplate(cause) => cause,
                     e => e.to_string(),
                 };
-                let why = fold.place(&found.seams);
+                let why = fold.place(&found.seams, &found.medial_points);
                 Error::InvalidTemplate(format!(
                     "the medial sheet folds by up to {:.0}° between neighbouring triangles at \
                      {} edges, the sharpest near ({:.1}, {:.1}, {:.1}) mm, {why}; a folded \
@@ -783,12 +784,14 @@ fn voxel_within(shape: &Shape, h: f64, memory: MemoryLimit) -> Result<f64> {
 pub const SHEET_FOLD_DEG: f64 = 60.0;
 
 /// The folds of a sheet past [`SHEET_FOLD_DEG`]: how many interior edges (in exactly two
-/// triangles; a seam's edges are in three), the largest angle, the middle of its edge, and
-/// whether that edge is in a seam's band (one of its triangles has a corner on a seam).
+/// triangles; a seam's edges are in three), the largest angle, the middle of its edge and its
+/// length, and whether that edge is in a seam's band (one of its triangles has a corner on a
+/// seam).
 struct Fold {
     edges: usize,
     max_deg: f64,
     at: Vec3,
+    edge_mm: f64,
     in_band: bool,
 }
 
@@ -810,7 +813,7 @@ impl Fold {
                     .push((f, a < b));
             }
         }
-        let (mut count, mut worst) = (0, None::<(f64, Vec3, bool)>);
+        let (mut count, mut worst) = (0, None::<(f64, [usize; 2], bool)>);
         let on_seam = |t: &[usize; 3]| t.iter().any(|&v| sheet_of_point[v].is_none());
         let mut edges: Vec<_> = by_edge.into_iter().collect();
         edges.sort_unstable_by_key(|(e, _)| *e);
@@ -828,36 +831,53 @@ impl Fold {
             count += 1;
             if worst.map_or(true, |(w, ..)| angle > w) {
                 let in_band = on_seam(&tris[f]) || on_seam(&tris[g]);
-                worst = Some((angle, (p[a] + p[b]) / 2.0, in_band));
+                worst = Some((angle, [a, b], in_band));
             }
         }
-        worst.map(|(max_deg, at, in_band)| Self {
+        worst.map(|(max_deg, [a, b], in_band)| Self {
             edges: count,
             max_deg,
-            at,
+            at: (p[a] + p[b]) / 2.0,
+            edge_mm: (p[a] - p[b]).norm(),
             in_band,
         })
     }
 
-    /// Where the sharpest fold lies, for its error: in a seam's band, inside a sheet at its
-    /// distance from the nearest of `seams` (a missed seam or the lattice laid over itself),
-    /// or, with no seam, where the shape probably branches.
-    fn place(&self, seams: &[Seam]) -> String {
+    /// Where the sharpest fold lies and what made it, for its error: in a seam's band, or
+    /// else (inside a sheet, at its distance from the nearest of `seams`) by the shape's
+    /// `medial_points` within the fold's edge (the lattice's spacing there): where they branch,
+    /// a seam that was not found; where they are one sheet, the sheet's lattice laid over
+    /// itself; where too few lie, a lattice laid across a gap in them.
+    fn place(&self, seams: &[Seam], medial_points: &[MedialPoint]) -> String {
+        if self.in_band {
+            return "in the band stitched between a sheet's cut and a seam".to_string();
+        }
+        let edge = self.edge_mm;
+        let why = match flat_about(medial_points, self.at, edge) {
+            Some(false) => {
+                "where the medial points branch: sheets meeting at a seam that was not found"
+                    .to_string()
+            }
+            Some(true) => format!(
+                "where the medial points are one sheet: the sheet's lattice (edges of {edge:.1} \
+                 mm there) laid over itself"
+            ),
+            None => format!(
+                "where fewer than {MIN_BALL_POINTS} medial points lie within {edge:.1} mm: the \
+                 lattice laid across a gap in them"
+            ),
+        };
         let nearest = (seams.iter())
             .flat_map(|seam| &seam.points)
             .map(|p| (p - self.at).norm())
             .fold(f64::INFINITY, f64::min);
-        if self.in_band {
-            "in the band stitched between a sheet's cut and a seam".to_string()
-        } else if nearest.is_finite() {
+        if nearest.is_finite() {
             format!(
-                "inside a sheet, {nearest:.0} mm from the nearest seam ({} found): a seam that \
-                 was not found, or the sheet's lattice laid over itself there",
+                "inside a sheet, {nearest:.0} mm from the nearest seam ({} found), {why}",
                 seams.len()
             )
         } else {
-            "where the shape probably branches (sheets meeting at a seam that was not found)"
-                .to_string()
+            why
         }
     }
 }
@@ -1133,19 +1153,48 @@ mod tests {
         let mut seam_at_0 = one_sheet;
         seam_at_0[0] = None;
         assert!(!Fold::of(&creased(120.0), &seam_at_0).unwrap().in_band);
-        // The error names the place: no seam, a seam 3 mm away, the band.
-        assert!(fold.place(&[]).contains("probably branches"));
+        // The error names the place and the cause, by the medial points within the fold's
+        // edge (1 mm) of it: one flat sheet of them, a plane crossed by a V of two half-planes
+        // (a seam not found), too few (a gap); inside a sheet 3 mm from a seam; in the band.
+        let grid = |offset: fn(f64, f64) -> Vec3| -> Vec<MedialPoint> {
+            (-8..=8)
+                .flat_map(|i| (-8..=8).map(move |j| (0.1 * i as f64, 0.1 * j as f64)))
+                .map(|(u, v)| MedialPoint {
+                    position: Vec3::new(1.0, 0.5, 0.0) + offset(u, v),
+                    radius: 0.1,
+                })
+                .collect()
+        };
+        let flat = grid(|u, v| Vec3::new(u, v, 0.0));
+        let mut branching = grid(|u, v| Vec3::new(u, v, 0.0));
+        branching.extend(grid(|u, v| Vec3::new(0.0, v, u.abs())));
+        let few = &flat[..5];
+        let lattice = fold.place(&[], &flat);
+        assert!(
+            lattice.starts_with("where the medial points are one sheet"),
+            "{lattice}"
+        );
+        assert!(
+            lattice.contains("edges of 1.0 mm there) laid over itself"),
+            "{lattice}"
+        );
+        let missed = fold.place(&[], &branching);
+        assert!(
+            missed.contains("branch: sheets meeting at a seam that was not"),
+            "{missed}"
+        );
+        assert!(fold.place(&[], few).contains("a gap in them"));
         let seam = Seam {
             points: vec![Vec3::new(1.0, 3.5, 0.0), Vec3::new(1.0, 9.0, 0.0)],
             radius: vec![0.1; 2],
         };
-        let inside = fold.place(std::slice::from_ref(&seam));
+        let inside = fold.place(std::slice::from_ref(&seam), &flat);
         assert!(
-            inside.contains("inside a sheet, 3 mm from the nearest seam (1 found)"),
+            inside.starts_with("inside a sheet, 3 mm from the nearest seam (1 found), where"),
             "{inside}"
         );
         let band = Fold::of(&creased(120.0), &seam_at_4).unwrap();
-        assert!(band.place(&[seam]).contains("in the band"));
+        assert!(band.place(&[seam], &flat).contains("in the band"));
     }
 
     fn figures(sound: [bool; 3], angle: f64, mismatch: f64) -> TemplateFigures {

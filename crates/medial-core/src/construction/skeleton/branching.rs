@@ -25,7 +25,7 @@ const BALL_RADII: f64 = 1.0;
 /// ball), 1/4 on a straight seam of three half-discs at 120°.
 const SEAM_FLATNESS: f64 = 0.1;
 /// Fewest points in a ball for its covariance to count.
-const MIN_BALL_POINTS: usize = 10;
+pub(crate) const MIN_BALL_POINTS: usize = 10;
 /// A piece of sheet counts when it holds at least this fraction of the medial points (smaller
 /// ones are spurs of boundary bumps, cut off where they join the sheet).
 const MIN_SHEET_FRACTION: f64 = 0.05;
@@ -405,6 +405,18 @@ fn assign_to_nearest_sheet(
     for (i, s) in nearest {
         sheet[i] = s;
     }
+}
+
+/// Whether the medial points `points` within `radius` (mm) of `at` are flat, one sheet as
+/// [`branching`] reads a ball (the smallest eigenvalue of their covariance below
+/// [`SEAM_FLATNESS`] of its trace); none when fewer than [`MIN_BALL_POINTS`] lie there.
+pub(crate) fn flat_about(points: &[MedialPoint], at: Vec3, radius: f64) -> Option<bool> {
+    let positions: Vec<Vec3> = (points.iter())
+        .map(|p| p.position)
+        .filter(|p| (p - at).norm() <= radius)
+        .collect();
+    let all: Vec<usize> = (0..positions.len()).collect();
+    (positions.len() >= MIN_BALL_POINTS).then(|| flat(&positions, &all))
 }
 
 /// Whether the points `near` of `positions` are flat: the smallest eigenvalue of their
