@@ -801,45 +801,16 @@ impl Fold {
     /// same way). `sheet_of_point` is `None` at the points on a seam.
     fn of(sheet: &MedialSheet, sheet_of_point: &[Option<usize>]) -> Option<Self> {
         let (p, tris) = (sheet.points(), sheet.triangles());
-        let normal = |t: &[usize; 3]| (p[t[1]] - p[t[0]]).cross(&(p[t[2]] - p[t[0]]));
-        let mut by_edge: std::collections::HashMap<(usize, usize), Vec<(usize, bool)>> =
-            std::collections::HashMap::new();
-        for (f, t) in tris.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                by_edge
-                    .entry((a.min(b), a.max(b)))
-                    .or_default()
-                    .push((f, a < b));
-            }
-        }
-        let (mut count, mut worst) = (0, None::<(f64, [usize; 2], bool)>);
+        let folds = sheet.folds(SHEET_FOLD_DEG);
+        let &(max_deg, [a, b], [f, g]) =
+            (folds.iter()).reduce(|w, e| if e.0 > w.0 { e } else { w })?;
         let on_seam = |t: &[usize; 3]| t.iter().any(|&v| sheet_of_point[v].is_none());
-        let mut edges: Vec<_> = by_edge.into_iter().collect();
-        edges.sort_unstable_by_key(|(e, _)| *e);
-        for ((a, b), faces) in edges {
-            let [(f, f_up), (g, g_up)] = faces[..] else {
-                continue;
-            };
-            let (m, n) = (normal(&tris[f]), normal(&tris[g]));
-            let sign = if f_up == g_up { -1.0 } else { 1.0 };
-            let cos = sign * m.dot(&n) / (m.norm() * n.norm());
-            let angle = cos.clamp(-1.0, 1.0).acos().to_degrees();
-            if angle.is_nan() || angle <= SHEET_FOLD_DEG {
-                continue;
-            }
-            count += 1;
-            if worst.map_or(true, |(w, ..)| angle > w) {
-                let in_band = on_seam(&tris[f]) || on_seam(&tris[g]);
-                worst = Some((angle, [a, b], in_band));
-            }
-        }
-        worst.map(|(max_deg, [a, b], in_band)| Self {
-            edges: count,
+        Some(Self {
+            edges: folds.len(),
             max_deg,
             at: (p[a] + p[b]) / 2.0,
             edge_mm: (p[a] - p[b]).norm(),
-            in_band,
+            in_band: on_seam(&tris[f]) || on_seam(&tris[g]),
         })
     }
 

@@ -107,6 +107,12 @@ const STRETCH_SLACK: f64 = 0.25;
 /// covers about `V·(√3/2)·d²`.
 const LATTICE_AREA: f64 = 0.866_025_403_784_438_6;
 
+/// A sheet's lattice whose neighbouring triangles turn against each other by more than this,
+/// degrees, lies over itself ([`ChartedSheet::sampled`]): between neighbours of a lattice
+/// spaced finer than the sheet's radius of curvature the turn is under a radian (57°); a right
+/// angle is past any bend the lattice is meant to follow.
+const LATTICE_FOLD_DEG: f64 = 90.0;
+
 /// A seam ends where the vertices of its sheets within this many lattice spacings of it end
 /// along it ([`clipped`]).
 const REACH_SPACINGS: f64 = 2.0;
@@ -522,8 +528,17 @@ impl ChartedSheet {
     }
 
     /// The sheet on the hexagon of `rings` and `stretch`: the first region sets the lattice's
-    /// spacing and the fits' window (`max(3 voxels, spacing/2)`); the sheet is fitted to the
+    /// spacing `s` and the fits' window (`max(3 voxels, s/2)`); the sheet is fitted to the
     /// points without spurs, on the region of those closed by the window.
+    ///
+    /// Where that sheet lies over itself (neighbouring triangles turned by more than
+    /// [`LATTICE_FOLD_DEG`]), it is sampled again on the region closed by `s`, which fills the
+    /// inlets of the outline up to about `2s` wide, and the one that folds less is kept: a
+    /// lattice cannot follow an inlet that narrow (it needs a row of points along each side
+    /// and one between), and the harmonic map crowds the rows either side of it against each
+    /// other until they fold at its tip (the biv-me heart's RV free wall, open between its
+    /// insertion lines where the valves are; decision 0413). Filled, the inlet is spanned by
+    /// the lattice, placed by fits that reach across it.
     ///
     /// Errors: those of [`Region::of`], [`Region::map_onto`] and `lattice_sheet`.
     fn sampled(&self, rings: usize, stretch: usize) -> Result<SampledSheet> {
@@ -533,12 +548,25 @@ impl ChartedSheet {
         let spacing = (self.first.area() / (lattice.points.len() as f64 * LATTICE_AREA)).sqrt();
         let window = (3.0 * voxel).max(0.5 * spacing);
         let cloud = ChartedCloud::new(&self.points, chart, Some(window));
-        let closing = (window / cell).ceil() as usize;
         let lift = |q: [f64; 2]| chart.on_surface(q);
-        let region = Region::of(&usable(chart, &cloud), cell, closing, &lift)?;
-        let in_chart = region.map_onto(&lattice)?;
+        let charted = usable(chart, &cloud);
         let fit = SheetFit::new(cloud, window, voxel);
-        let sheet = lattice_sheet(&fit, &lattice, &in_chart)?;
+        let sheet_closed_by = |closing: f64| -> Result<MedialSheet> {
+            let closing = (closing / cell).ceil() as usize;
+            let in_chart = Region::of(&charted, cell, closing, &lift)?.map_onto(&lattice)?;
+            lattice_sheet(&fit, &lattice, &in_chart)
+        };
+        let sharpest = |sheet: &MedialSheet| {
+            (sheet.folds(LATTICE_FOLD_DEG).iter()).fold(0.0, |w: f64, f| w.max(f.0))
+        };
+        let mut sheet = sheet_closed_by(window)?;
+        if sharpest(&sheet) > 0.0 {
+            if let Ok(closed) = sheet_closed_by(spacing) {
+                if sharpest(&closed) < sharpest(&sheet) {
+                    sheet = closed;
+                }
+            }
+        }
         Ok(SampledSheet {
             lattice: SheetLattice {
                 sheet,
