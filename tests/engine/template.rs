@@ -2,7 +2,7 @@
 //! toy (three sheets meeting at a seam), their templates rasterized (the templates' own medial
 //! points are the true sheet; its radius is their distance to the templates' boundary).
 
-use medial::construction::{sheet_of_mask, MedialSheet, Sampling, ShapeSheet};
+use medial::construction::{sheet_of_mask, MedialAxis, MedialSheet, Sampling, ShapeSheet};
 use medial::image::rasterize::{grid_around, rasterize};
 use medial::mesh::distance::SurfaceDistance;
 use medial::model::{MedialTemplate, SpokeMetrics};
@@ -66,15 +66,17 @@ fn to_sheet(template: &MedialTemplate, radius: &[f64], p: Vec3) -> (Vec3, f64) {
         .expect("a sheet has triangles")
 }
 
-/// The template of a synthetic shape and the sheet recovered from its rasterization.
-fn recover(shape: Shape) -> (MedialTemplate, ShapeSheet) {
+/// The template of a synthetic shape, and the medial axis and sheet recovered from its
+/// rasterization.
+fn recover(shape: Shape) -> (MedialTemplate, MedialAxis, ShapeSheet) {
     let case = SyntheticCase::build(shape).unwrap();
     let template = case.projection.template;
     let boundary = template.boundary_mesh().unwrap();
     let (dims, to_world) = grid_around(&boundary, VOXEL, 3.0 * VOXEL).unwrap();
     let mask = rasterize(&boundary, dims, to_world).unwrap();
-    let found = sheet_of_mask(&mask, Sampling::Atoms(300)).unwrap();
-    (template, found)
+    let axis = MedialAxis::of_mask(&mask).unwrap();
+    let found = axis.sheet(Sampling::Atoms(300)).unwrap();
+    (template, axis, found)
 }
 
 /// How far a recovered vertex is from the true sheet and how far its radius is from the
@@ -168,7 +170,7 @@ fn mean_max(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
 
 #[test]
 fn the_cup_sheet_is_recovered_within_half_a_voxel_on_average_and_its_radius_within_a_voxel() {
-    let (template, found) = recover(Shape::Cup);
+    let (template, _, found) = recover(Shape::Cup);
     let (line, [mean_d, max_d, max_r]) = summary(&sheet_errors(&template, &found));
     eprintln!("cup: {line}");
     assert!(
@@ -183,7 +185,7 @@ fn the_cup_sheet_is_recovered_within_half_a_voxel_on_average_and_its_radius_with
 fn the_subdivided_cup_sheet_stays_on_the_medial_sheet_where_plain_subdivision_leaves_it() {
     // Loop subdivision moves each point towards its neighbours' mean, off a curved sheet; the
     // template's atoms are the subdivided sheet's points placed again on the medial points.
-    let (template, found) = recover(Shape::Cup);
+    let (template, _, found) = recover(Shape::Cup);
     let subdivided = found.subdivided().unwrap().sheet;
     let plain = found.sheet.loop_subdivide().unwrap();
     assert_eq!(subdivided.triangles(), plain.triangles());
@@ -221,8 +223,9 @@ fn to_polyline(line: &[Vec3], p: &Vec3) -> f64 {
 #[test]
 fn the_toy_seam_is_recovered_within_a_voxel_its_sheets_within_half_a_voxel_on_average_and_their_radius_within_a_voxel(
 ) {
-    let (template, found) = recover(Shape::Toy);
-    assert_eq!((found.branching.sheets, found.branching.seams), (3, 1));
+    let (template, axis, found) = recover(Shape::Toy);
+    let counts = axis.branches.counts;
+    assert_eq!((counts.sheets, counts.seams), (3, 1));
     // The true seam: the template's medial edges in three triangles, along z (its ends, where
     // it meets the free edges, are corners with one spoke per region there).
     let mut in_triangles: std::collections::HashMap<(usize, usize), usize> = Default::default();
@@ -303,7 +306,7 @@ fn a_branching_shape_gets_about_the_atoms_asked_for() {
 fn the_toy_band_along_its_seam_is_placed_on_the_medial_sheets_and_can_be_put_back() {
     // The stitching's band from each sheet's cut to the seam is a straight strip of triangles;
     // its atoms are placed on the medial points like the others, and kept as subdivided beside.
-    let (template, found) = recover(Shape::Toy);
+    let (template, _, found) = recover(Shape::Toy);
     let subdivided = found.subdivided().unwrap();
     let sheet = &subdivided.sheet;
     let free = free_points(sheet);

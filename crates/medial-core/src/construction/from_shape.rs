@@ -196,7 +196,7 @@ pub struct TemplateFigures {
     pub medial_points: usize,
     /// The share of the shape (by the medial points' summed radii) in the largest piece of its
     /// medial points that does not reach the rest and was left out of the sheet
-    /// ([`ShapeSheet::left_out`]); above [`LEFT_OUT_LIMIT`] the template misses a wall.
+    /// ([`MedialAxis::left_out`]); above [`LEFT_OUT_LIMIT`] the template misses a wall.
     pub medial_left_out: f64,
     /// Per sheet, the chart it was sampled in: sphere (a bowl) or plane.
     pub chart: Vec<ChartKind>,
@@ -378,7 +378,14 @@ pub fn template_of_shape_watched(
             sampling,
             ..*options
         };
-        built_at(shape, &mask, found, (voxel, wanted), &options, memory)
+        built_at(
+            shape,
+            &mask,
+            (&axis, found),
+            (voxel, wanted),
+            &options,
+            memory,
+        )
     };
     let first = build(options.sampling);
     // What twice the atoms may mend, and the Dice to beat where the first template is sound.
@@ -480,14 +487,15 @@ pub struct NotKept {
     pub why: String,
 }
 
-/// [`template_of_shape`] at one sampling: the sheet `found` of `mask` (the shape on the grid of
-/// voxel `voxel`, mm; `wanted` the voxel the thinnest wall asked for, where coarser) at
+/// [`template_of_shape`] at one sampling: the sheet `found` of the medial axis `axis` of `mask`
+/// (the shape on the grid of voxel `voxel`, mm; `wanted` the voxel the thinnest wall asked
+/// for, where coarser) at
 /// `options.sampling`, subdivided, inflated, fitted to the shape (`options.fit`), projected,
 /// and mended where its boundary intersects itself.
 fn built_at(
     shape: &Shape,
     mask: &Volume,
-    found: ShapeSheet,
+    (axis, found): (&MedialAxis, ShapeSheet),
     (voxel, wanted): (f64, Option<f64>),
     options: &TemplateOptions,
     memory: MemoryLimit,
@@ -506,7 +514,7 @@ fn built_at(
                     Error::InvalidTemplate(cause) => cause,
                     e => e.to_string(),
                 };
-                let why = fold.place(&found.seams, &found.medial_points);
+                let why = fold.place(&found.seams, &axis.points);
                 Error::InvalidTemplate(format!(
                     "the medial sheet folds by up to {:.0}° between neighbouring triangles at \
                      {} edges, the sharpest near ({:.1}, {:.1}, {:.1}) mm, {why}; a folded \
@@ -531,7 +539,7 @@ fn built_at(
             };
             let figures = figures_of(
                 &template,
-                &found,
+                (axis, &found),
                 shape,
                 mask,
                 [
@@ -966,7 +974,7 @@ fn fit_to_shape(
 /// projection move]`).
 fn figures_of(
     template: &MedialTemplate,
-    found: &ShapeSheet,
+    (axis, found): (&MedialAxis, &ShapeSheet),
     shape: &Shape,
     mask: &Volume,
     [voxel, dice_before_fit, moved]: [f64; 3],
@@ -984,7 +992,7 @@ fn figures_of(
     let self_intersection_free = self_intersections(&boundary).is_empty();
     let fold = |f: fn(f64, f64) -> f64, init| metrics.thickness.iter().copied().fold(init, f);
     let meets_targets = dice >= TARGET_DICE
-        && found.left_out <= LEFT_OUT_LIMIT
+        && axis.left_out <= LEFT_OUT_LIMIT
         && summary.max_spoke_normal_deg <= MAX_ANGLE_DEG
         && summary.max_spoke_mismatch_pct <= MAX_MISMATCH_PCT
         && closed_manifold
@@ -994,12 +1002,12 @@ fn figures_of(
         voxel_mm: voxel,
         voxel_wanted_mm: None,
         grid_dims: mask.dims(),
-        medial_points: found.medial_points.len(),
-        medial_left_out: found.left_out,
+        medial_points: axis.points.len(),
+        medial_left_out: axis.left_out,
         chart: found.lattices.iter().map(|l| l.chart.kind).collect(),
         rings: found.lattices.iter().map(|l| l.rings).collect(),
         stretch: found.lattices.iter().map(|l| l.stretch).collect(),
-        sheets: found.branching.sheets,
+        sheets: axis.branches.counts.sheets,
         seams: found.seams.len(),
         dice,
         dice_input_grid,

@@ -135,25 +135,17 @@ impl MedialSheet {
     pub fn folds(&self, bound_deg: f64) -> Vec<(f64, [usize; 2], [usize; 2])> {
         let (p, tris) = (self.points(), self.triangles());
         let normal = |t: &[usize; 3]| (p[t[1]] - p[t[0]]).cross(&(p[t[2]] - p[t[0]]));
-        let mut by_edge: HashMap<(usize, usize), Vec<(usize, bool)>> = HashMap::new();
-        for (f, t) in tris.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (t[k], t[(k + 1) % 3]);
-                by_edge.entry(edge_key(a, b)).or_default().push((f, a < b));
-            }
-        }
-        let mut edges: Vec<_> = by_edge.into_iter().collect();
-        edges.sort_unstable_by_key(|(e, _)| *e);
-        (edges.into_iter())
-            .filter_map(|((a, b), faces)| {
-                let [(f, f_up), (g, g_up)] = faces[..] else {
+        let edges = Edges::new(tris);
+        (edges.ends.iter().zip(&edges.fans))
+            .filter_map(|(&(a, b), fan)| {
+                let [f, g] = fan[..] else {
                     return None;
                 };
-                let (m, n) = (normal(&tris[f]), normal(&tris[g]));
-                let sign = if f_up == g_up { -1.0 } else { 1.0 };
+                let (m, n) = (normal(&tris[f.tri]), normal(&tris[g.tri]));
+                let sign = if f.forward == g.forward { -1.0 } else { 1.0 };
                 let cos = sign * m.dot(&n) / (m.norm() * n.norm());
                 let angle = cos.clamp(-1.0, 1.0).acos().to_degrees();
-                (angle > bound_deg).then_some((angle, [a, b], [f, g]))
+                (angle > bound_deg).then_some((angle, [a, b], [f.tri, g.tri]))
             })
             .collect()
     }

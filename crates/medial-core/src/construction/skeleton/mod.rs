@@ -42,7 +42,7 @@ pub mod stitch;
 use crate::construction::inflate::MedialSheet;
 use crate::image::Volume;
 use crate::{Error, Result, Vec3};
-use branching::{branching, Branches, Branching};
+use branching::{branching, Branches};
 use chart::Chart;
 use disc::{lattice_sheet, ChartedCloud, SheetFit};
 use lattice::Lattice;
@@ -132,19 +132,13 @@ pub struct SheetLattice {
     pub stretch: usize,
 }
 
-/// What [`sheet_of_mask`] built.
+/// The medial sheet of a [`MedialAxis`] at one sampling ([`MedialAxis::sheet`]).
 #[derive(Clone, Debug)]
 pub struct ShapeSheet {
     /// The sheet (coarse: Loop-subdivide it once before inflating, as the paper does); for a
     /// branching shape its sheets stitched along the seams, whose vertices come first.
     pub sheet: MedialSheet,
-    /// The medial points found (after dropping islands).
-    pub medial_points: Vec<MedialPoint>,
-    /// The share of the medial points' summed radii that the largest dropped island held
-    /// ([`MedialAxis::left_out`]): about its share of the shape's volume left out of the
-    /// sheet.
-    pub left_out: f64,
-    /// How many of them were kept as not on spurs (`ChartedCloud::new`), over all sheets.
+    /// How many of the [`MedialAxis`]'s points were kept as not on spurs (`ChartedCloud::new`), over all sheets.
     pub spur_free_points: usize,
     /// How each sheet was sampled.
     pub lattices: Vec<SheetLattice>,
@@ -154,8 +148,6 @@ pub struct ShapeSheet {
     /// The seams as sampled and stitched along (those some sheet reaches, [`stitch()`]): their
     /// vertices are the sheet's first, seam after seam.
     pub seams: Vec<Seam>,
-    /// The sheets and seams of the medial points.
-    pub branching: Branching,
     /// The sheet (`0 .. sheets`, in the order of `lattices`) of each of the sheet's points;
     /// `None` on a seam.
     pub sheet_of_point: Vec<Option<usize>>,
@@ -319,12 +311,9 @@ impl MedialAxis {
             sheet_of_point: vec![Some(0); built.lattice.sheet.points().len()],
             sheet: built.lattice.sheet.clone(),
             spur_free_points: built.fit.cloud().len(),
-            medial_points: self.points.clone(),
-            left_out: self.left_out,
             lattices: vec![built.lattice],
             border: built.border,
             seams: Vec::new(),
-            branching: counts,
             fits: vec![built.fit],
         })
     }
@@ -396,12 +385,9 @@ fn several_sheets(axis: &MedialAxis, sampling: Sampling) -> Result<ShapeSheet> {
         border: free_edge_points(&stitched.sheet),
         sheet: stitched.sheet,
         spur_free_points: built.iter().map(|b| b.fit.cloud().len()).sum(),
-        medial_points: points.clone(),
-        left_out: axis.left_out,
         lattices: built.iter().map(|b| b.lattice.clone()).collect(),
         fits: built.into_iter().map(|b| b.fit).collect(),
         seams: stitched.seams,
-        branching: counts,
     })
 }
 
@@ -560,11 +546,11 @@ impl ChartedSheet {
             (sheet.folds(LATTICE_FOLD_DEG).iter()).fold(0.0, |w: f64, f| w.max(f.0))
         };
         let mut sheet = sheet_closed_by(window)?;
-        if sharpest(&sheet) > 0.0 {
-            if let Ok(closed) = sheet_closed_by(spacing) {
-                if sharpest(&closed) < sharpest(&sheet) {
-                    sheet = closed;
-                }
+        let folded = sharpest(&sheet);
+        if folded > 0.0 {
+            match sheet_closed_by(spacing) {
+                Ok(closed) if sharpest(&closed) < folded => sheet = closed,
+                _ => {}
             }
         }
         Ok(SampledSheet {
