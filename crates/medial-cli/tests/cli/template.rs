@@ -285,7 +285,7 @@ fn a_failed_build_leaves_what_it_found_in_the_work_folder() {
     one_line_error(
         &["template", s(&cross), "--out", s(&out), "--work", s(&work)],
         1,
-        &["4 triangles"],
+        &["4 triangles", "4 sheets meet along it"],
     );
     assert!(!out.exists());
     assert!(read_nifti(&work.join("shape_mask.nii.gz")).is_ok());
@@ -300,69 +300,99 @@ fn a_failed_build_leaves_what_it_found_in_the_work_folder() {
 
 /// biv-me's template heart (a real two-ventricle myocardium, 1 mm): three sheets meeting along
 /// the RV insertion seam, built with default options into a sound template (decisions 0402,
-/// 0406, 0408), as given and moved by a fraction of a voxel (a stand-in for the same heart
-/// segmented on another grid: before decision 0408 that move found no seam). Both are built
+/// 0406, 0408), as given, moved by a fraction of a voxel (a stand-in for the same heart
+/// segmented on another grid: before decision 0408 that move found no seam) and turned by 24.4°
+/// (a heart scanned at an angle to the world axes, its voxels resampled). All three are built
 /// again from 600 atoms (decision 0409) for their Dice below the 0.95 target at 300: as given
 /// 0.920 once mended where it crossed itself after the fit (decision 0410), 0.943 from 600;
-/// moved, 0.930 from 300. Both under the 0.95 of [`assert_targets`]: guarded at the 0.93.
+/// moved, 0.930 from 300; turned, 0.934 from 600. Without decision 0413's rule (a lattice that
+/// turns past 90° laid again on its closed region) the turned heart's 600- and 1,200-atom
+/// sheets fold by 177–179° and its template stays at 300 atoms and 0.921 (a rotation drawn at
+/// random, never tuned on; its addendum). All under the 0.95 of [`assert_targets`]: guarded at
+/// the 0.93.
 #[test]
 fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam_wherever_its_voxels_fall() {
     let dir = tempfile::tempdir().unwrap();
     let heart = data("bivme/template_myocardium.nii.gz");
-    for (k, by) in [[0.0; 3], [0.1, 0.4, 0.9]].into_iter().enumerate() {
-        let shape = if k == 0 {
-            heart.clone()
-        } else {
-            let moved = dir.path().join(format!("moved{k}.nii.gz"));
-            write_nifti(
-                &moved,
-                &moved_by(&read_nifti(&heart).unwrap(), by),
-                NiftiType::U8,
-            )
-            .unwrap();
-            moved
-        };
+    let mask = read_nifti(&heart).unwrap();
+    let [nx, ny, nz] = mask.dims().map(|n| n as f64);
+    let centre = Vec3::new(nx - 1.0, ny - 1.0, nz - 1.0) / 2.0;
+    let turn = nalgebra::Rotation3::from_axis_angle(
+        &nalgebra::Unit::new_normalize(Vec3::new(0.9614, -0.2750, -0.0136)),
+        24.39_f64.to_radians(),
+    );
+    let cases = [
+        (
+            "moved by (0.1, 0.4, 0.9) voxel",
+            2,
+            translation(&Vec3::new(-0.1, -0.4, -0.9)),
+        ),
+        (
+            "turned by 24.4°",
+            mask.dims().into_iter().max().unwrap() / 6,
+            translation(&centre) * turn.inverse().to_homogeneous() * translation(&-centre),
+        ),
+    ];
+    let shapes =
+        std::iter::once(("as given", heart.clone())).chain(cases.into_iter().enumerate().map(
+            |(k, (name, pad, motion))| {
+                let path = dir.path().join(format!("heart{k}.nii.gz"));
+                write_nifti(&path, &resampled(&mask, pad, motion), NiftiType::U8).unwrap();
+                (name, path)
+            },
+        ));
+    for (k, (name, shape)) in shapes.enumerate() {
         let out = dir.path().join(format!("heart{k}.vtk"));
         let figures = run_json(&["template", s(&shape), "--out", s(&out), "-q"]);
         let counts = (figures["sheets"].as_u64(), figures["seams"].as_u64());
-        assert_eq!(counts, (Some(3), Some(1)), "moved by {by:?}: {figures}");
+        assert_eq!(counts, (Some(3), Some(1)), "{name}: {figures}");
         assert!(
             figures["atoms_by_spokes"][2].as_u64().unwrap() >= 10,
-            "{figures}"
+            "{name}: {figures}"
         );
-        assert!(f(&figures["dice"]) >= 0.93, "moved by {by:?}: {figures}");
+        assert!(f(&figures["dice"]) >= 0.93, "{name}: {figures}");
         let again = &figures["sampled_again"];
         assert_ne!(
             again["kept"], again["first"],
-            "built again and kept: {figures}"
+            "{name}: built again and kept: {figures}"
         );
         assert!(again["not_kept"].is_array(), "{figures}");
         assert!(figures["band_put_back"].is_array(), "{figures}");
         assert!(figures["spokes_shortened"]["atoms"].is_array(), "{figures}");
-        assert!(f(&figures["max_spoke_normal_deg"]) <= 0.1, "{figures}");
-        assert!(f(&figures["max_spoke_mismatch_pct"]) <= 0.1, "{figures}");
+        assert!(
+            f(&figures["max_spoke_normal_deg"]) <= 0.1,
+            "{name}: {figures}"
+        );
+        assert!(
+            f(&figures["max_spoke_mismatch_pct"]) <= 0.1,
+            "{name}: {figures}"
+        );
         for key in ["closed_manifold", "outward", "self_intersection_free"] {
-            assert_eq!(figures[key], Value::Bool(true), "{key}: {figures}");
+            assert_eq!(figures[key], Value::Bool(true), "{name}, {key}: {figures}");
         }
     }
 }
 
-/// The segmentation `mask` moved by `by` voxels on its own grid (two voxels wider each side):
-/// its foreground interpolated trilinearly and cut at one half.
-fn moved_by(mask: &Volume, by: [f64; 3]) -> Volume {
-    let [nx, ny, nz] = mask.dims();
-    let dims = [nx + 4, ny + 4, nz + 4];
-    let shift =
-        |d: [f64; 3]| mask.voxel_to_world() * nalgebra::Matrix4::new_translation(&Vec3::from(d));
+/// The translation by `by` as a homogeneous matrix.
+fn translation(by: &Vec3) -> nalgebra::Matrix4<f64> {
+    nalgebra::Matrix4::new_translation(by)
+}
+
+/// The segmentation `mask` on its own grid `pad` voxels wider each side, moved: the new image at
+/// voxel `v` (the old grid's numbering) holds the old one at `motion · v`, its foreground
+/// interpolated trilinearly and cut at one half.
+fn resampled(mask: &Volume, pad: usize, motion: nalgebra::Matrix4<f64>) -> Volume {
+    let dims = mask.dims().map(|n| n + 2 * pad);
+    let padded = translation(&Vec3::repeat(-(pad as f64)));
     let sampled = (mask.foreground(None))
-        .resampled(dims, shift(by.map(|b| -2.0 - b)))
+        .resampled(dims, mask.voxel_to_world() * (motion * padded))
         .unwrap();
     let data = sampled
         .data()
         .iter()
         .map(|&v| f64::from(u8::from(v > 0.5)))
         .collect();
-    Volume::new(dims, data, shift([-2.0; 3])).unwrap()
+    Volume::new(dims, data, mask.voxel_to_world() * padded).unwrap()
 }
 
 /// The distances (mm) from `points` to the nearest point of `sheet` (its triangles), ascending.

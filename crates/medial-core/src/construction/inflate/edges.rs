@@ -68,9 +68,10 @@ impl Edges {
             Some(e) => {
                 let tris: Vec<usize> = self.fans[e].iter().map(|m| m.tri).collect();
                 Err(Error::InvalidMesh(format!(
-                    "medial edge {:?} is in {} triangles {tris:?}; at most 3 (a seam) are allowed",
+                    "medial edge {:?} is in {n} triangles {tris:?}: {n} sheets meet along it, and \
+                     at most 3 can (a seam, whose atoms have three spokes)",
                     self.ends[e],
-                    tris.len()
+                    n = tris.len()
                 )))
             }
             None => Ok(()),
