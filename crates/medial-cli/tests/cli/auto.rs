@@ -77,11 +77,11 @@ fn an_automatic_fit_to_a_segmentation_is_medial_and_its_config_reruns_to_the_sam
     assert!(err.contains("start chosen by a trial"), "{err}");
     let last = &summary["final"];
     println!("automatic toy fit: {summary:#}");
-    // The toy's AL iterations settle before the last of the five (the constraints within
-    // `settle_constraint` = 1e-3, the Dice no longer moving): the stage converged.
+    // The toy's AL iterations settle (the constraints within `settle_constraint` = 1e-3, the
+    // Dice no longer moving; since decision 0202's affine start in the last of the five, before
+    // it earlier): the stage converged.
     let stage = &summary["stages"][0];
     assert_eq!(stage["settled"], true, "{stage}");
-    assert!(stage["al_iterations"].as_u64().unwrap() < 5, "{stage}");
     assert!(f(&last["max_abs_constraint"]) <= 1e-3, "{last}");
     assert_eq!(summary["status"], "converged");
     // Coarse to fine in time: the first three AL iterations in 5 steps, the rest in 10, as

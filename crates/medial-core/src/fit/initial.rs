@@ -51,14 +51,17 @@ use nalgebra::Matrix4;
 /// projection's own tolerance can tell.
 pub const AFFINE_ANISOTROPY: f64 = 0.01;
 
-/// The largest landmark move of the projection that follows an affine map found from the
-/// moments of filled shapes (an image, a rasterized surface), as a fraction of the template's
-/// mean spoke length (its half thickness): such a map is taken only where the projection
-/// follows it with small moves. (A least-squares affine map between corresponding points is
-/// the shape's own change and is always followed.) A move of a quarter of the spoke reshapes the
-/// boundary–medial prisms by as much, and an anisotropic map that needs it is mostly fitting
-/// the wall's thickness (which the flow follows, thickening the wall along its normals) rather
-/// than the shape's extent (which the similarity has matched).
+/// The largest landmark move of the projection that follows an affine map found against filled
+/// shapes (an image, a rasterized surface), as a fraction of the template's mean spoke length
+/// (its half thickness), beyond which the map is not taken on trust. (A least-squares affine
+/// map between corresponding points is the shape's own change and is always followed.) A move
+/// of a quarter of the spoke reshapes the boundary–medial prisms by as much, and an anisotropic
+/// map that needs it may be fitting the wall's thickness (which the flow follows, thickening
+/// the wall along its normals) rather than the shape's extent (which the similarity has
+/// matched) — or the shape's own proportions: a heart 10 % out of proportion needs 1.0–1.2 mm
+/// at a few atoms of a 3.4 mm mean spoke (decision 0202). So beyond it the similarity alone is
+/// a start too ([`AlignedTemplate::similarity`]): an image fit judges the two by a trial of the
+/// flow; a fit without a trial takes the similarity.
 pub const MAX_PROJECTION_MOVE: f64 = 0.25;
 
 /// The least fraction of the target points' spread ([`explained_spread`]) that the
@@ -245,11 +248,39 @@ pub struct AlignedTemplate {
     pub matrix: Matrix4<f64>,
     /// One line per step (the projection's figures; a fallback and its reason).
     pub notes: Vec<String>,
+    /// Where the affine map needs the projection to move landmarks by more than
+    /// [`MAX_PROJECTION_MOVE`]: the template carried by the similarity alone and its map, a
+    /// start to judge beside the affine one (by a trial of the flow, where the fit makes one;
+    /// [`AlignedTemplate::similarity_alone`] otherwise).
+    pub similarity: Option<(MedialTemplate, Matrix4<f64>)>,
+}
+
+impl AlignedTemplate {
+    /// The similarity alone where the affine map needed large projection moves
+    /// ([`AlignedTemplate::similarity`]; noted), else `self`: for a fit that does not judge its
+    /// starts by a trial.
+    pub fn similarity_alone(self) -> Self {
+        match self.similarity {
+            Some((template, matrix)) => {
+                let mut notes = self.notes;
+                notes.push("the similarity alone is taken".into());
+                Self {
+                    template,
+                    matrix,
+                    notes,
+                    similarity: None,
+                }
+            }
+            None => self,
+        }
+    }
 }
 
 /// Carries `template` by `alignment`. A map that is not a similarity breaks the medial
 /// constraints: the carried template is projected back onto them ([`project`]); where that
-/// fails, the similarity alone is taken (a similarity keeps a medial template medial). A
+/// fails, the similarity alone is taken (a similarity keeps a medial template medial); where it
+/// moves landmarks by more than [`MAX_PROJECTION_MOVE`], the similarity is offered beside it
+/// ([`AlignedTemplate::similarity`]). A
 /// template that is not medial as given (an inflated sheet before its projection) is projected
 /// too, and taken as it is when that fails (noted).
 pub fn align_template(
@@ -257,6 +288,7 @@ pub fn align_template(
     alignment: &InitialAlignment,
 ) -> Result<AlignedTemplate> {
     let mut notes = Vec::new();
+    let mut similarity = None;
     let options = ProjectOptions::default();
     let mut matrix = alignment.matrix;
     let affine = alignment.is_affine();
@@ -283,15 +315,15 @@ pub fn align_template(
                 notes.push(format!(
                     "the initial affine map (anisotropy {:.1} %) needs the projection to move \
                      landmarks by up to {:.3} mm, more than {MAX_PROJECTION_MOVE} of the mean \
-                     spoke ({spoke:.3} mm): the similarity alone is taken",
+                     spoke ({spoke:.3} mm)",
                     100.0 * anisotropy(&matrix),
                     projection.max_displacement
                 ));
-                matrix = alignment.similarity;
-                let similar = InitialAlignment::similarity(matrix, Vec::new());
+                let similar = InitialAlignment::similarity(alignment.similarity, Vec::new());
                 let aligned = align_template(template, &similar)?;
                 notes.extend(aligned.notes);
-                carried = aligned.template;
+                similarity = Some((aligned.template, alignment.similarity));
+                carried = projection.template;
             }
             Ok(projection) => {
                 notes.push(format!(
@@ -327,6 +359,7 @@ pub fn align_template(
         template: carried,
         matrix,
         notes,
+        similarity,
     })
 }
 

@@ -20,7 +20,8 @@ use crate::construction::inflate::LIMIT_ROUNDS;
 use crate::fit::augmented_lagrangian::{Constraints, Stage, StageOutcome};
 use crate::fit::guard::Guard;
 use crate::fit::initial::{
-    align_template, initial_alignment, thickened, InitialAlignment, THICKEN_AT_LEAST,
+    align_template, initial_alignment, thickened, AlignedTemplate, InitialAlignment,
+    THICKEN_AT_LEAST,
 };
 use crate::fit::plan::{self, Geometry};
 use crate::fit::prepare::{PreparedStage, Target};
@@ -224,20 +225,29 @@ fn thicker_start(
 pub const TRIAL_OVERLAP_SHARE: f64 = 0.5;
 
 /// The candidate starts of a fit of `template` to the foreground `mask` (see
-/// [`crate::fit::trial`]): `aligned` (the template carried by `matrix`); the same thickened
-/// to the foreground's wall ([`thicker_start`], `ratio` as thick); and the template where it
-/// was given, projected onto its constraints where it is not medial, when the alignment moved
-/// it. A start whose voxel Dice is under [`TRIAL_OVERLAP_SHARE`] of the best start's is not a
+/// [`crate::fit::trial`]): `aligned` (the template carried by the initial map); the template
+/// carried by the similarity alone where the affine map needed large projection moves
+/// ([`AlignedTemplate::similarity`]); the latter (else the aligned one) thickened to the
+/// foreground's wall ([`thicker_start`], `ratio` as thick); and the template where it was given, projected onto
+/// its constraints where it is not medial, when the alignment moved it. A start whose voxel Dice is under [`TRIAL_OVERLAP_SHARE`] of the best start's is not a
 /// candidate (noted).
 fn image_candidates(
     template: &MedialTemplate,
-    aligned: MedialTemplate,
-    matrix: Matrix4<f64>,
+    aligned: AlignedTemplate,
     ratio: f64,
     mask: &crate::image::Volume,
     notes: &mut Vec<String>,
 ) -> Result<Vec<Candidate>> {
-    let thick = thicker_start(&aligned, ratio, notes).map(|(name, thick)| (name, thick, matrix));
+    let matrix = aligned.matrix;
+    let similarity = (aligned.similarity).map(|(t, m)| ("similarity".to_string(), t, m));
+    let aligned = aligned.template;
+    // Thickened from the similarity where there is one: an affine map that needs large
+    // projection moves may already be fitting the wall's thickness (decision 0201).
+    let (thin, thin_matrix) = match &similarity {
+        Some((_, t, m)) => (t, *m),
+        None => (&aligned, matrix),
+    };
+    let thick = thicker_start(thin, ratio, notes).map(|(name, thick)| (name, thick, thin_matrix));
     let unmoved = (matrix != Matrix4::identity())
         .then(|| {
             let unmoved = InitialAlignment::similarity(Matrix4::identity(), Vec::new());
@@ -247,6 +257,7 @@ fn image_candidates(
         .transpose()?;
     let starts: Vec<(String, MedialTemplate, Matrix4<f64>)> =
         std::iter::once(("aligned".to_string(), aligned, matrix))
+            .chain(similarity)
             .chain(thick)
             .chain(unmoved)
             .collect();
@@ -324,22 +335,21 @@ pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<
             let axes = PrincipalAxes::of(boundary.points())?;
             let spacing = Geometry::of(template, &boundary, &axes).alignment_spacing();
             let mut alignment = initial_alignment(&boundary, target, spacing, memory)?;
-            let aligned = align_template(template, &alignment)?;
-            alignment.notes.extend(aligned.notes);
-            alignment.matrix = aligned.matrix;
+            let mut aligned = align_template(template, &alignment)?;
             let mask = match target {
                 Target::Image { volume, label } => Some(volume.foreground(*label)),
                 _ => None,
             };
+            let trial = mask.is_some() && alignment.thickness_ratio.is_some();
+            if !trial {
+                aligned = aligned.similarity_alone();
+            }
+            alignment.notes.append(&mut aligned.notes);
+            alignment.matrix = aligned.matrix;
             let candidates = match (&mask, alignment.thickness_ratio) {
-                (Some(mask), Some(ratio)) => image_candidates(
-                    template,
-                    aligned.template,
-                    alignment.matrix,
-                    ratio,
-                    mask,
-                    &mut alignment.notes,
-                )?,
+                (Some(mask), Some(ratio)) => {
+                    image_candidates(template, aligned, ratio, mask, &mut alignment.notes)?
+                }
                 _ => vec![Candidate::new(
                     "aligned",
                     Model::Medial(Box::new(aligned.template)),
