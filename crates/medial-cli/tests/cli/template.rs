@@ -336,7 +336,7 @@ fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam_wherever_its_voxels
     let shapes =
         std::iter::once(("as given", heart.clone())).chain(cases.into_iter().enumerate().map(
             |(k, (name, pad, motion))| {
-                let path = dir.path().join(format!("heart{k}.nii.gz"));
+                let path = dir.path().join(format!("heart{}.nii.gz", k + 1));
                 write_nifti(&path, &resampled(&mask, pad, motion), NiftiType::U8).unwrap();
                 (name, path)
             },

@@ -280,9 +280,8 @@ impl AlignedTemplate {
 /// constraints: the carried template is projected back onto them ([`project`]); where that
 /// fails, the similarity alone is taken (a similarity keeps a medial template medial); where it
 /// moves landmarks by more than [`MAX_PROJECTION_MOVE`], the similarity is offered beside it
-/// ([`AlignedTemplate::similarity`]). A
-/// template that is not medial as given (an inflated sheet before its projection) is projected
-/// too, and taken as it is when that fails (noted).
+/// ([`AlignedTemplate::similarity`]). A template that is not medial as given (an inflated sheet
+/// before its projection) is projected too, and taken as it is when that fails (noted).
 pub fn align_template(
     template: &MedialTemplate,
     alignment: &InitialAlignment,

@@ -228,8 +228,9 @@ pub const TRIAL_OVERLAP_SHARE: f64 = 0.5;
 /// [`crate::fit::trial`]): `aligned` (the template carried by the initial map); the template
 /// carried by the similarity alone where the affine map needed large projection moves
 /// ([`AlignedTemplate::similarity`]); the latter (else the aligned one) thickened to the
-/// foreground's wall ([`thicker_start`], `ratio` as thick); and the template where it was given, projected onto
-/// its constraints where it is not medial, when the alignment moved it. A start whose voxel Dice is under [`TRIAL_OVERLAP_SHARE`] of the best start's is not a
+/// foreground's wall ([`thicker_start`], `ratio` as thick); and the template where it was
+/// given, projected onto its constraints where it is not medial, when the alignment moved it.
+/// A start whose voxel Dice is under [`TRIAL_OVERLAP_SHARE`] of the best start's is not a
 /// candidate (noted).
 fn image_candidates(
     template: &MedialTemplate,
@@ -340,17 +341,18 @@ pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<
                 Target::Image { volume, label } => Some(volume.foreground(*label)),
                 _ => None,
             };
-            let trial = mask.is_some() && alignment.thickness_ratio.is_some();
-            if !trial {
+            // Starts are judged by a trial only against an image (filled shapes' moments).
+            let trial = mask.as_ref().zip(alignment.thickness_ratio);
+            if trial.is_none() {
                 aligned = aligned.similarity_alone();
             }
             alignment.notes.append(&mut aligned.notes);
             alignment.matrix = aligned.matrix;
-            let candidates = match (&mask, alignment.thickness_ratio) {
-                (Some(mask), Some(ratio)) => {
+            let candidates = match trial {
+                Some((mask, ratio)) => {
                     image_candidates(template, aligned, ratio, mask, &mut alignment.notes)?
                 }
-                _ => vec![Candidate::new(
+                None => vec![Candidate::new(
                     "aligned",
                     Model::Medial(Box::new(aligned.template)),
                     alignment.matrix,

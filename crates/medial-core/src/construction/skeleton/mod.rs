@@ -138,7 +138,8 @@ pub struct ShapeSheet {
     /// The sheet (coarse: Loop-subdivide it once before inflating, as the paper does); for a
     /// branching shape its sheets stitched along the seams, whose vertices come first.
     pub sheet: MedialSheet,
-    /// How many of the [`MedialAxis`]'s points were kept as not on spurs (`ChartedCloud::new`), over all sheets.
+    /// How many of the [`MedialAxis`]'s points were kept as not on spurs (`ChartedCloud::new`),
+    /// over all sheets.
     pub spur_free_points: usize,
     /// How each sheet was sampled.
     pub lattices: Vec<SheetLattice>,
