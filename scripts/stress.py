@@ -13,8 +13,8 @@ balls of one voxel), a rotation (15 to 45 degrees about a random axis), a shift 
 template's longest extent in a random direction); every case also has `medial synth`'s default
 bend (25°) and twist (10°). Each case: `medial synth --from TEMPLATE ...` then
 `medial fit --template template.vtk --image target.nii.gz`. A case passes with exit 0, voxel
-Dice >= 0.93, max spoke-normal angle <= 1° and max mismatch <= 1 %; one that ends with exit 3
-or 4 ends honestly, one with exit 0 and a worse fit would be a lie (counted apart). Writes
+Dice >= 0.93, max spoke-normal angle <= 1° and max mismatch <= 1 %; one that ends with exit 3,
+4 or 6 ends honestly, one with exit 0 and a worse fit would be a lie (counted apart). Writes
 OUT/table.md (a row per case) and OUT/summary.json, and prints the pass rate and the spread
 (min, median, max) of Dice, angle, mismatch, evaluations and seconds.
 """

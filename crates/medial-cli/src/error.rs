@@ -62,6 +62,11 @@ pub enum CliError {
     /// written, marked as such. Exit code 4.
     #[error("{0}")]
     ConstraintsNotMet(String),
+    /// The fit's model missed a part of its image's foreground (more than 2 % of it farther
+    /// from the model than two voxels or the flow's σ); the results were written, marked as
+    /// such. Exit code 6.
+    #[error("{0}")]
+    MissesTarget(String),
     /// `medial template`: the template leaves out part of the shape (a wall whose medial points
     /// do not reach the rest); it was written with its figures. Exit code 1.
     #[error("{0}")]
@@ -190,13 +195,15 @@ pub enum CliError {
 
 impl CliError {
     /// The process exit code: 3 for an unsound fit, 4 for a fit whose constraints were not
-    /// met (both with results written), 5 for `medial check` finding a model not medial,
+    /// met, 6 for a fit whose model missed a part of its image (all with results written), 5
+    /// for `medial check` finding a model not medial,
     /// 130 / 143 for a fit stopped by SIGINT / SIGTERM (with its checkpoint), 1 for every other
     /// failure (2, a wrong command line, is clap's).
     pub fn exit_code(&self) -> u8 {
         match self {
             CliError::Unsound(_) => 3,
             CliError::ConstraintsNotMet(_) => 4,
+            CliError::MissesTarget(_) => 6,
             CliError::NotMedial(_) => 5,
             CliError::Interrupted { signal, .. } => signal.exit_code(),
             CliError::Usage(_) => 2,

@@ -641,20 +641,19 @@ impl Fit<'_> {
         outcomes: &[StageOutcome],
         seconds: Vec<f64>,
     ) -> Result<Vec<StageSummary>, CliError> {
+        let sigma = self.flow.kernel().sigma();
         self.config
             .stages
             .iter()
             .zip(self.prepared)
             .zip(outcomes.iter().zip(seconds))
             .map(|((cfg, p), (outcome, seconds))| {
-                let figures = stage::end_figures(p, self.model, &outcome.evaluation)?;
-                Ok(stage_summary(
-                    cfg,
-                    p.constraints.is_some(),
-                    outcome,
-                    seconds,
-                    figures,
-                ))
+                let (figures, miss) =
+                    stage::end_figures(p, self.model, &outcome.evaluation, sigma)?;
+                Ok(StageSummary {
+                    misses: miss.map(|m| m.to_string()),
+                    ..stage_summary(cfg, p.constraints.is_some(), outcome, seconds, figures)
+                })
             })
             .collect()
     }
@@ -716,6 +715,8 @@ fn warn_of_strain(strains: &[f64]) {
 fn status_of(last: &StageSummary) -> Status {
     if last.unsound.is_some() {
         Status::Unsound
+    } else if last.misses.is_some() {
+        Status::MissesTarget
     } else if last.constraints_met == Some(false) {
         Status::ConstraintsNotMet
     } else if last.converged {
@@ -777,6 +778,7 @@ fn stage_summary(
                 u.al_iteration, u.iteration, u.cause
             )
         }),
+        misses: None,
         figures,
     }
 }
@@ -867,6 +869,13 @@ fn failure(
                 cfg.tolerance_pct,
             )))
         }
+        Status::MissesTarget => Some(CliError::MissesTarget(format!(
+            "stage '{}': the model misses its target: {}: check the start (alignment.txt, \
+             aligned_template.vtk) and that the template is of this structure; {written}\
+             misses_target\")",
+            last.name,
+            last.misses.as_deref().unwrap_or_default(),
+        ))),
         Status::Converged | Status::Budget | Status::Interrupted => None,
     }
 }

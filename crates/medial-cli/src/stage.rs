@@ -9,6 +9,7 @@ use crate::summary::Figures;
 use medial_core::fit::objective::Evaluation;
 use medial_core::fit::{PreparedStage, Target};
 use medial_core::flow::Flow;
+use medial_core::image::agreement::{Disagreement, Miss};
 use medial_core::model::Model;
 use medial_core::Vec3;
 use medial_io::affine::Convention;
@@ -152,16 +153,25 @@ pub fn figures_at(stage: &PreparedStage, model: &Model, e: &Evaluation, q: &[Vec
 }
 
 /// The figures at the end of a stage: [`figures_at`] the end of the flow, with the voxel
-/// overlap of Dice stages and the surface distance of varifold stages.
+/// overlap and the parts missed and added of Dice stages and the surface distance of varifold
+/// stages; and, for a Dice stage, the part of the target the model missed if it is too large
+/// ([`Disagreement::miss`] for the flow's kernel width `sigma`, mm).
 pub fn end_figures(
     stage: &PreparedStage,
     model: &Model,
     e: &Evaluation,
-) -> Result<Figures, CliError> {
+    sigma: f64,
+) -> Result<(Figures, Option<Miss>), CliError> {
     let q = &e.final_positions;
-    Ok(Figures {
-        voxel_dice: stage.voxel_dice(model, q)?,
+    let disagreement = stage.disagreement(model, q)?;
+    let pct = |share: f64| 100.0 * share;
+    let d = disagreement.as_ref();
+    let figures = Figures {
+        voxel_dice: d.map(Disagreement::voxel_dice),
+        missed_pct: d.map(|d| pct(d.missed_beyond(d.reach(sigma)))),
+        added_pct: d.map(|d| pct(d.added_beyond(d.reach(sigma)))),
         surface_distance: stage.surface_distance(model, q),
         ..figures_at(stage, model, e, q)
-    })
+    };
+    Ok((figures, d.and_then(|d| d.miss(sigma))))
 }

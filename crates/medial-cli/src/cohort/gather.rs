@@ -92,11 +92,14 @@ impl Standing {
             && self.failure.is_none()
     }
 
-    /// Whether the fit failed: it ended unsound or with its constraints not met, or it stopped
-    /// with an error.
+    /// Whether the fit failed: it ended unsound, with its constraints not met or missing its
+    /// target, or it stopped with an error.
     pub fn failed(&self) -> bool {
         match self.ended() {
-            Some(status) => matches!(status, Status::Unsound | Status::ConstraintsNotMet),
+            Some(status) => matches!(
+                status,
+                Status::Unsound | Status::ConstraintsNotMet | Status::MissesTarget
+            ),
             None => self.failure.is_some(),
         }
     }
@@ -130,7 +133,7 @@ enum RowStatus {
 #[derive(Serialize)]
 struct Row<'a> {
     subject: &'a str,
-    /// `converged`, `budget`, `constraints_not_met`, `unsound`, `interrupted`, `failed` or
+    /// `converged`, `budget`, `constraints_not_met`, `misses_target`, `unsound`, `interrupted`, `failed` or
     /// `pending`.
     status: RowStatus,
     /// Of a failed fit: what `medial fit` would have exited with.

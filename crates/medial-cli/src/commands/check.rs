@@ -47,7 +47,7 @@ struct CheckReport {
     /// Whether the mean residual of the sheet atoms is within `max_residual_pct`.
     medial: bool,
     /// A fit folder: the `status` its summary.json gives (`converged`, `budget`,
-    /// `constraints_not_met`, `unsound`, `interrupted`); a fit that `medial fit` did not end as
+    /// `constraints_not_met`, `misses_target`, `unsound`, `interrupted`); a fit that `medial fit` did not end as
     /// sound and within its tolerances fails the check whatever its balls.
     #[serde(skip_serializing_if = "Option::is_none")]
     fit_status: Option<String>,
@@ -114,6 +114,11 @@ pub fn run(args: &CheckArgs) -> Result<(), CliError> {
         Some("constraints_not_met") => {
             return Err(CliError::ConstraintsNotMet(said(
                 "ended with its constraints above their tolerance (status \"constraints_not_met\")",
+            )))
+        }
+        Some("misses_target") => {
+            return Err(CliError::MissesTarget(said(
+                "missed a part of its target (status \"misses_target\")",
             )))
         }
         Some("interrupted") => {

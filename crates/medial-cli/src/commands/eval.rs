@@ -65,7 +65,7 @@ pub fn run(config: &Config, options: &EvalOptions) -> Result<Figures, CliError> 
     if let (Some(path), Some(g)) = (&options.gradient, &gradient) {
         medial_io::npy::write_npy(path, &[steps, k, 3], g)?;
     }
-    stage::end_figures(&prepared, &model, &evaluation)
+    Ok(stage::end_figures(&prepared, &model, &evaluation, flow.kernel().sigma())?.0)
 }
 
 /// Reads a `.npy` array and checks its shape.

@@ -32,7 +32,7 @@ text-align:right;font-size:0.9em}th{background:#f4f4f4}td.key,th.key{text-align:
 svg{max-width:100%;height:auto;display:block;margin:0.5em 0}\
 pre{background:#f7f7f7;padding:1em;overflow-x:auto;font-size:0.85em}\
 .status{padding:2px 8px;border-radius:4px;background:#eee}\
-.converged,.budget{background:#d4edda}.constraints_not_met{background:#fff3cd}\
+.converged,.budget{background:#d4edda}.constraints_not_met,.misses_target{background:#fff3cd}\
 .unsound{background:#f8d7da}p.note{color:#555;font-size:0.9em}";
 
 /// The HTML of the report of `folder`.

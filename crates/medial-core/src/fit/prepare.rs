@@ -26,7 +26,7 @@ use crate::attachment::Attachment;
 use crate::fit::augmented_lagrangian::AlSchedule;
 use crate::fit::optimize::LbfgsOptions;
 use crate::fit::spec::{AttachmentSpec, DiceSpec, MedialTolerance, StageSpec, VarifoldSpec};
-use crate::image::rasterize::voxel_dice;
+use crate::image::agreement::Disagreement;
 use crate::image::volume::Volume;
 use crate::memory::{Estimate, MemoryLimit};
 use crate::mesh::distance::SurfaceDistance;
@@ -255,9 +255,10 @@ impl PreparedStage {
         })
     }
 
-    /// Dice stages: the voxel overlap of the model's boundary at landmarks `q` (rasterized on
-    /// the image's grid) with the image's foreground.
-    pub fn voxel_dice(&self, model: &Model, q: &[Vec3]) -> Result<Option<f64>> {
+    /// Dice stages: where the model's boundary at landmarks `q` (rasterized on the image's
+    /// grid) and the image's foreground disagree: the voxel overlap, and the part of the target
+    /// the model missed ([`Disagreement`]).
+    pub fn disagreement(&self, model: &Model, q: &[Vec3]) -> Result<Option<Disagreement>> {
         let (Some(mask), Some(template)) = (&self.mask, model.medial()) else {
             return Ok(None);
         };
@@ -265,7 +266,7 @@ impl PreparedStage {
             q[..template.boundary_count()].to_vec(),
             template.boundary_triangles().to_vec(),
         )?;
-        Ok(Some(voxel_dice(&boundary, mask)?))
+        Ok(Some(Disagreement::new(&boundary, mask)?))
     }
 
     /// Varifold stages: the mean distance of the model's boundary at landmarks `q` to the

@@ -2,6 +2,7 @@
 //! ([`volume`]), exact binary rasterization of closed meshes ([`rasterize`]), and the exact
 //! Euclidean distance and feature transform of a mask ([`distance`]).
 
+pub mod agreement;
 pub mod distance;
 pub mod rasterize;
 pub mod slice;

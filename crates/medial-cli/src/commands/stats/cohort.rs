@@ -87,6 +87,7 @@ impl Cohort {
                     "interrupted" => "its fit was interrupted (run the batch again)",
                     "unsound" => "its fit ended unsound",
                     "constraints_not_met" => "its fit ended with its constraints not met",
+                    "misses_target" => "its fit missed a part of its target",
                     _ => "its fit has no usable status in cohort.csv",
                 }),
             })
