@@ -49,7 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "Dice {:.3}, voxel Dice {:.3}, max spoke–normal {:.2}°, max spoke mismatch {:.2} %",
         last.evaluation.dice.unwrap_or(f64::NAN),
-        overlap.voxel_dice(),
+        overlap.voxel_dice().unwrap_or(f64::NAN),
         metrics.max_spoke_normal_deg,
         100.0 * metrics.max_spoke_mismatch
     );

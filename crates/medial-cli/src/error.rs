@@ -62,9 +62,9 @@ pub enum CliError {
     /// written, marked as such. Exit code 4.
     #[error("{0}")]
     ConstraintsNotMet(String),
-    /// The fit's model missed a part of its image's foreground (more than 2 % of it farther
-    /// from the model than two voxels or the flow's σ); the results were written, marked as
-    /// such. Exit code 6.
+    /// The fit's model missed a part of its target image or surface (more than 2 % of it
+    /// farther from the model than two voxels or mean edges, or the flow's σ); the results were
+    /// written, marked as such. Exit code 6.
     #[error("{0}")]
     MissesTarget(String),
     /// `medial template`: the template leaves out part of the shape (a wall whose medial points
@@ -195,7 +195,7 @@ pub enum CliError {
 
 impl CliError {
     /// The process exit code: 3 for an unsound fit, 4 for a fit whose constraints were not
-    /// met, 6 for a fit whose model missed a part of its image (all with results written), 5
+    /// met, 6 for a fit whose model missed a part of its target (all with results written), 5
     /// for `medial check` finding a model not medial,
     /// 130 / 143 for a fit stopped by SIGINT / SIGTERM (with its checkpoint), 1 for every other
     /// failure (2, a wrong command line, is clap's).

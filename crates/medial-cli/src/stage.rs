@@ -7,9 +7,9 @@ use crate::error::CliError;
 use crate::memory;
 use crate::summary::Figures;
 use medial_core::fit::objective::Evaluation;
+use medial_core::fit::{Disagreement, Miss};
 use medial_core::fit::{PreparedStage, Target};
 use medial_core::flow::Flow;
-use medial_core::image::agreement::{Disagreement, Miss};
 use medial_core::model::Model;
 use medial_core::Vec3;
 use medial_io::affine::Convention;
@@ -153,8 +153,8 @@ pub fn figures_at(stage: &PreparedStage, model: &Model, e: &Evaluation, q: &[Vec
 }
 
 /// The figures at the end of a stage: [`figures_at`] the end of the flow, with the voxel
-/// overlap and the parts missed and added of Dice stages and the surface distance of varifold
-/// stages; and, for a Dice stage, the part of the target the model missed if it is too large
+/// overlap of Dice stages, the surface distance of varifold stages and the parts missed and
+/// added of both; and, for those, the part of the target the model missed if it is too large
 /// ([`Disagreement::miss`] for the flow's kernel width `sigma`, mm).
 pub fn end_figures(
     stage: &PreparedStage,
@@ -167,7 +167,7 @@ pub fn end_figures(
     let pct = |share: f64| 100.0 * share;
     let d = disagreement.as_ref();
     let figures = Figures {
-        voxel_dice: d.map(Disagreement::voxel_dice),
+        voxel_dice: d.and_then(Disagreement::voxel_dice),
         missed_pct: d.map(|d| pct(d.missed_beyond(d.reach(sigma)))),
         added_pct: d.map(|d| pct(d.added_beyond(d.reach(sigma)))),
         surface_distance: stage.surface_distance(model, q),

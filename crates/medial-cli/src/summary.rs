@@ -27,13 +27,15 @@ pub struct Figures {
     /// rasterized model `M` with the binary foreground `A` of the image, on the image's grid.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub voxel_dice: Option<f64>,
-    /// Dice stages, at the end of a stage: the share (%) of `A`'s voxels outside `M` and
-    /// farther from it than two voxels or the flow's σ (the larger), the part of the target the
-    /// model missed (above 2 % the fit misses its target: status `misses_target`).
+    /// Dice and varifold stages, at the end of a stage: the share (%) of the target outside the
+    /// model and farther from it than two voxels (two of a target surface's mean edges) or the
+    /// flow's σ, the larger: the part of the target the model missed (of `A`'s voxels, or of
+    /// the target surface's area; above 2 % the fit misses its target: `misses_target`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub missed_pct: Option<f64>,
-    /// Dice stages, at the end of a stage: `M`'s voxels outside `A` and as far from it, the
-    /// part the model has and the target lacks, % of `A`'s voxels.
+    /// Dice and varifold stages, at the end of a stage: the model's voxels (or boundary area)
+    /// outside the target and as far from it, the part the model has and the target lacks, %
+    /// of the target.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub added_pct: Option<f64>,
     /// Mean distance to the SSD targets (mm), for SSD stages.
@@ -115,8 +117,8 @@ pub struct StageSummary {
     /// Set when the stage ended at an unsound iterate: where and why.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub unsound: Option<String>,
-    /// Dice stages: set when the model missed a part of its target (`missed_pct` above 2 %):
-    /// how much, and the target's voxel farthest from the model.
+    /// Dice and varifold stages: set when the model missed a part of its target (`missed_pct`
+    /// above 2 %): how much, and the target's part farthest from the model.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub misses: Option<String>,
     /// The figures at the end of the stage.
@@ -136,9 +138,9 @@ pub enum Status {
     /// Every stage ran, but the medial constraints are above their tolerance at the end
     /// (exit code 4).
     ConstraintsNotMet,
-    /// Every stage ran, but the last one's model missed a part of its image's foreground:
-    /// more than 2 % of its voxels lie farther from the model than two voxels or the flow's σ
-    /// (exit code 6).
+    /// Every stage ran, but the last one's model missed a part of its target: more than 2 % of
+    /// an image's foreground (or of a surface's area) lies farther from the model than two
+    /// voxels (two mean edges) or the flow's σ (exit code 6).
     MissesTarget,
     /// A stage ended at an unsound iterate (folded, diverged, not finite); the results are
     /// those of the last sound iterate and later stages did not run (exit code 3).

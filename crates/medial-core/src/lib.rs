@@ -20,8 +20,8 @@
 //! | [`flow::ambient`] | the fitted flow of any point of space, forward and inverse | [`flow::ambient::AmbientFlow`] |
 //! | [`attachment`] | data terms: SSD to corresponding points, Dice against an image | [`attachment::ssd::Ssd`], [`attachment::dice::DiceAttachment`] |
 //! | [`attachment::varifold`] | surfaces without correspondence: varifold, oriented varifold, current | [`attachment::varifold::Varifold`], [`attachment::varifold::default_width`] |
-//! | [`image`] | volumes in world space, rasterization of closed meshes, distance and feature transform, where a model and a segmentation disagree | [`image::Volume`], [`image::rasterize`], [`image::distance`], [`image::agreement::Disagreement`] |
-//! | [`fit`] | a fit as data ([`fit::FitSpec`]), the automatic plan and initial alignment, stages prepared against their targets, objective, L-BFGS, the augmented-Lagrangian schedule | [`fit::run::automatic`], [`fit::run::Fit`], [`fit::plan::automatic`], [`fit::Objective`], [`fit::run_stage`] |
+//! | [`image`] | volumes in world space, rasterization of closed meshes, distance and feature transform | [`image::Volume`], [`image::rasterize`], [`image::distance`] |
+//! | [`fit`] | a fit as data ([`fit::FitSpec`]), the automatic plan and initial alignment, stages prepared against their targets, objective, L-BFGS, the augmented-Lagrangian schedule, a fit judged by the part of its target it missed | [`fit::run::automatic`], [`fit::run::Fit`], [`fit::plan::automatic`], [`fit::Objective`], [`fit::run_stage`], [`fit::Disagreement`] |
 //! | [`memory`] | memory estimates of a run, checked against a limit before allocating | [`memory::Estimate`], [`memory::MemoryLimit`] |
 //! | [`construction`] | templates from a shape (the whole pipeline; its medial sheet) and from a medial sheet: inflation, projection onto the constraints | [`construction::from_shape::template_of_shape`], [`construction::MedialAxis`], [`construction::sheet_of_mask`], [`construction::inflate()`], [`construction::project()`] |
 //! | [`synth`] | synthetic cases with a known deformation | [`synth::SyntheticCase`], [`synth::Warp`] |

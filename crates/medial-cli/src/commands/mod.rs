@@ -42,7 +42,7 @@ pub enum Command {
     /// the fit after the current iteration with a checkpoint and the results so far (exit code
     /// 130 / 143); --resume continues it to the same bits. A fit that ends unsound exits 3, one
     /// whose constraints are above their tolerance 4, one whose model misses a part of its
-    /// image 6, each with its results written and its status in summary.json.
+    /// image or surface 6, each with its results written and its status in summary.json.
     Fit {
         /// The config file (TOML); relative paths in it are relative to its folder. With it,
         /// --template and the targets override the config's.

@@ -4,8 +4,10 @@
 //! several stages in a row ([`stages`]), which can pause after any accepted iterate and resume
 //! from a serialisable [`Checkpoint`] to the same bits; and the initial alignment, a similarity
 //! then an affine map ([`align`]), with the candidate starts of an automatic fit judged by a
-//! short trial of the flow ([`trial`]).
+//! short trial of the flow ([`trial`]); and where a fitted model and its target disagree, the
+//! rule that tells a part of the target missed from a boundary placed off ([`agreement`]).
 
+pub mod agreement;
 pub mod align;
 pub mod augmented_lagrangian;
 pub mod guard;
@@ -20,6 +22,7 @@ pub mod spec;
 pub mod stages;
 pub mod trial;
 
+pub use agreement::{Disagreement, Miss};
 pub use align::{
     affine_between, align_affine, align_similarity, anisotropy, explained_spread,
     similarity_between, Alignment, AlignmentFailure,

@@ -23,10 +23,10 @@ use crate::attachment::dice::{DiceAttachment, DiceParams};
 use crate::attachment::ssd::Ssd;
 use crate::attachment::varifold::{Varifold, VarifoldParams};
 use crate::attachment::Attachment;
+use crate::fit::agreement::Disagreement;
 use crate::fit::augmented_lagrangian::AlSchedule;
 use crate::fit::optimize::LbfgsOptions;
 use crate::fit::spec::{AttachmentSpec, DiceSpec, MedialTolerance, StageSpec, VarifoldSpec};
-use crate::image::agreement::Disagreement;
 use crate::image::volume::Volume;
 use crate::memory::{Estimate, MemoryLimit};
 use crate::mesh::distance::SurfaceDistance;
@@ -80,8 +80,9 @@ pub struct PreparedStage {
     /// Dice stages: the binary foreground of the image (before smoothing), to report the voxel
     /// overlap of the rasterized model.
     pub mask: Option<Arc<Volume>>,
-    /// Varifold stages: the target surface, to report the distance of the model's boundary to it.
-    pub surface: Option<Arc<SurfaceDistance>>,
+    /// Varifold stages: the target surface, to report the distance of the model's boundary to it
+    /// and the part of it the model missed.
+    pub surface: Option<Arc<(TriMesh, SurfaceDistance)>>,
     /// Varifold stages: the kernel width in use, mm (given, or chosen from the target surface).
     pub varifold_width: Option<f64>,
     /// The medial constraints, when they apply.
@@ -176,7 +177,7 @@ impl PreparedStage {
             }
             (AttachmentSpec::Varifold(spec), Target::Surface(mesh)) => {
                 let varifold = varifold(spec, model, mesh)?;
-                surface = Some(Arc::new(SurfaceDistance::new(mesh)?));
+                surface = Some(Arc::new((mesh.clone(), SurfaceDistance::new(mesh)?)));
                 varifold_width = Some(varifold.width());
                 let weight = weight / varifold.target_norm2();
                 (Arc::new(varifold), weight)
@@ -255,18 +256,25 @@ impl PreparedStage {
         })
     }
 
-    /// Dice stages: where the model's boundary at landmarks `q` (rasterized on the image's
-    /// grid) and the image's foreground disagree: the voxel overlap, and the part of the target
-    /// the model missed ([`Disagreement`]).
+    /// Where the model's boundary at landmarks `q` and the stage's target disagree, and the
+    /// part of the target the model missed ([`Disagreement`]): in Dice stages of a medial
+    /// template the boundary rasterized on the image's grid against its foreground (with the
+    /// voxel overlap), in varifold stages the boundary against the target surface (none for
+    /// other stages).
     pub fn disagreement(&self, model: &Model, q: &[Vec3]) -> Result<Option<Disagreement>> {
-        let (Some(mask), Some(template)) = (&self.mask, model.medial()) else {
-            return Ok(None);
+        let boundary = || {
+            TriMesh::new(
+                q[..model.boundary_count()].to_vec(),
+                model.boundary_triangles().to_vec(),
+            )
         };
-        let boundary = TriMesh::new(
-            q[..template.boundary_count()].to_vec(),
-            template.boundary_triangles().to_vec(),
-        )?;
-        Ok(Some(Disagreement::new(&boundary, mask)?))
+        match (&self.mask, model.medial(), &self.surface) {
+            (Some(mask), Some(_), _) => Ok(Some(Disagreement::new(&boundary()?, mask)?)),
+            (None, _, Some(target)) => {
+                Ok(Some(Disagreement::of_surfaces(&boundary()?, &target.0)?))
+            }
+            _ => Ok(None),
+        }
     }
 
     /// Varifold stages: the mean distance of the model's boundary at landmarks `q` to the
@@ -274,7 +282,7 @@ impl PreparedStage {
     pub fn surface_distance(&self, model: &Model, q: &[Vec3]) -> Option<f64> {
         self.surface
             .as_ref()
-            .map(|s| s.mean_distance(&q[..model.boundary_count()]))
+            .map(|s| s.1.mean_distance(&q[..model.boundary_count()]))
     }
 
     /// SSD stages: the mean distance of the model's boundary at landmarks `q` to its targets, mm.

@@ -1,9 +1,7 @@
 //! Images: scalar volumes placed in world space by an affine map, sampled trilinearly
-//! ([`volume`]), exact binary rasterization of closed meshes ([`rasterize`]), the exact
-//! Euclidean distance and feature transform of a mask ([`distance`]), and where a model and a
-//! segmentation disagree, and how far apart ([`agreement`]).
+//! ([`volume`]), exact binary rasterization of closed meshes ([`rasterize`]), and the exact
+//! Euclidean distance and feature transform of a mask ([`distance`]).
 
-pub mod agreement;
 pub mod distance;
 pub mod rasterize;
 pub mod slice;

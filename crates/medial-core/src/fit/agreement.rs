@@ -1,6 +1,6 @@
-//! Where a closed model surface and a segmentation disagree, and how far from each other: the
-//! voxel overlap a fit reports, and the rule that tells a fit that missed a part of its target
-//! from one that placed its boundary a voxel off.
+//! Where a fitted model and its target disagree, and how far from each other: the voxel
+//! overlap a fit reports, and the rule that tells a fit that missed a part of its target from
+//! one that placed its boundary a voxel off.
 //!
 //! Voxel Dice counts every voxel on which the rasterized model `M` and the foreground `A`
 //! differ the same, whether it lies along the boundary or in a part one has and the other
@@ -12,10 +12,12 @@
 //! than `σ` is detail the flow cannot enter, not a part missed either. [`Disagreement`] keeps
 //! the distance of each differing voxel to the other set, so that the share beyond any reach can
 //! be read, and judges a fit by the part of its target it missed beyond the larger of the two
-//! ([`Disagreement::reach`], [`Miss`]).
+//! ([`Disagreement::reach`], [`Miss`]). A target surface is judged the same way, its triangles
+//! for voxels and its mean edge for the voxel's size ([`Disagreement::of_surfaces`]): a mesh
+//! is known to about its sampling.
 //!
 //! ```
-//! use medial_core::image::agreement::Disagreement;
+//! use medial_core::fit::agreement::Disagreement;
 //! use medial_core::testing::meshes::octahedron;
 //! use medial_core::TriMesh;
 //! use medial_core::image::rasterize::{grid_around, rasterize};
@@ -25,7 +27,7 @@
 //! let (dims, grid) = grid_around(&mesh, 0.1, 0.2).unwrap();
 //! let target = rasterize(&mesh, dims, grid).unwrap();
 //! let d = Disagreement::new(&mesh, &target).unwrap();
-//! assert_eq!(d.voxel_dice(), 1.0);
+//! assert_eq!(d.voxel_dice(), Some(1.0));
 //! assert!(d.miss(0.1).is_none());
 //! // Half the size: the target's outer shell is missed, 0.29 mm deep (0.5/√3, to the model's
 //! // surface; a little more to its voxels), and more than a third of it beyond two voxels.
@@ -43,6 +45,7 @@ use rayon::prelude::*;
 use crate::image::distance::FeatureTransform;
 use crate::image::rasterize::rasterize;
 use crate::image::Volume;
+use crate::mesh::distance::SurfaceDistance;
 use crate::{Result, TriMesh, Vec3};
 
 /// The least reach beyond which a voxel of the target outside the model is a part missed rather
@@ -59,34 +62,52 @@ pub const MISS_REACH_VOXELS: f64 = 2.0;
 /// below what fits that ended in the wrong place or on another structure do.
 pub const MAX_MISSED_SHARE: f64 = 0.02;
 
-/// The voxels on which a rasterized model and a mask differ, each with its distance (mm) to the
-/// nearest voxel of the other set; see the module documentation.
+/// Parts of a model or a target: (distance to the other, mm; weight), by distance.
+type Parts = Vec<(f64, f64)>;
+
+/// Where a model and its target differ, each part with its distance (mm) to the other and its
+/// weight: the voxels on which a rasterized model and a mask differ ([`Disagreement::new`]), or
+/// the triangles of a model's boundary and a target surface farther apart than nothing
+/// ([`Disagreement::of_surfaces`]); see the module documentation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Disagreement {
-    /// Distances of the voxels of the foreground outside the model, to the model, ascending.
-    missed: Vec<f64>,
-    /// Distances of the voxels of the model outside the foreground, to the foreground, ascending.
-    added: Vec<f64>,
-    /// Voxels of the foreground.
-    foreground: usize,
-    /// Voxels of the model.
-    model: usize,
-    /// The centre of the voxel of the foreground farthest outside the model (none: no voxel of
-    /// the foreground is outside it).
+    /// The target's parts outside the model: (distance to the model, weight), by distance.
+    missed: Parts,
+    /// The model's parts outside the target: (distance to the target, weight), by distance.
+    added: Parts,
+    /// The target's whole weight (voxels, or area in mm²).
+    target: f64,
+    /// The model's whole weight.
+    model: f64,
+    /// The centre of the target's part farthest outside the model (none: nothing outside it).
     farthest_missed: Option<Vec3>,
-    /// The grid's largest voxel spacing, mm.
-    voxel: f64,
+    /// The target's sampling step, mm: the grid's largest voxel spacing, or the target
+    /// surface's mean edge length.
+    step: f64,
+    /// What the parts are.
+    part: Part,
 }
 
-/// A fit that missed a part of its target: more than [`MAX_MISSED_SHARE`] of the target's
-/// voxels lie outside the model beyond the reach.
+/// What the parts of a [`Disagreement`] are.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// Voxels of an image's grid, each of weight 1.
+    Voxels,
+    /// Triangles of a surface, each weighing its area (mm²) and placed at its centroid.
+    Area,
+}
+
+/// A fit that missed a part of its target: more than [`MAX_MISSED_SHARE`] of the target (its
+/// voxels, or its area) lies outside the model beyond the reach.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Miss {
-    /// The share of the target's voxels outside the model beyond the reach.
+    /// The share of the target outside the model beyond the reach.
     pub share: f64,
+    /// What the share is of.
+    pub part: Part,
     /// The reach, mm ([`Disagreement::reach`]).
     pub reach: f64,
-    /// The centre of the target's voxel farthest from the model (world, mm).
+    /// The centre of the target's part farthest from the model (world, mm).
     pub farthest: Vec3,
     /// Its distance to the model, mm.
     pub distance: f64,
@@ -94,11 +115,15 @@ pub struct Miss {
 
 impl std::fmt::Display for Miss {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (what, step) = match self.part {
+            Part::Voxels => ("voxels lie", "two voxels"),
+            Part::Area => ("area lies", "two of its mean edges"),
+        };
         let p = self.farthest;
         write!(
             f,
-            "{:.1} % of the target's voxels lie outside the model farther than {:.2} mm from it \
-             (two voxels or the flow's σ, the larger), more than {} %; the farthest, at ({:.1}, \
+            "{:.1} % of the target's {what} outside the model farther than {:.2} mm from it \
+             ({step} or the flow's σ, the larger), more than {} %; the farthest, at ({:.1}, \
              {:.1}, {:.1}) mm, is {:.1} mm from it",
             100.0 * self.share,
             self.reach,
@@ -123,10 +148,11 @@ impl Disagreement {
         let mut disagreement = Self {
             missed: Vec::new(),
             added: Vec::new(),
-            foreground: 0,
-            model: 0,
+            target: 0.0,
+            model: 0.0,
             farthest_missed: None,
-            voxel: s.max(),
+            step: s.max(),
+            part: Part::Voxels,
         };
         let Some(crop) = Crop::around(dims, model.data(), mask.data()) else {
             return Ok(disagreement);
@@ -136,38 +162,63 @@ impl Disagreement {
         let (missed, farthest) = distances(&target, &model, crop.dims, spacing)?;
         disagreement.missed = missed;
         disagreement.added = distances(&model, &target, crop.dims, spacing)?.0;
-        disagreement.foreground = target.iter().filter(|&&v| v).count();
-        disagreement.model = model.iter().filter(|&&v| v).count();
+        disagreement.target = target.iter().filter(|&&v| v).count() as f64;
+        disagreement.model = model.iter().filter(|&&v| v).count() as f64;
         disagreement.farthest_missed = farthest.map(|n| mask.voxel_centre(crop.index(n)));
         Ok(disagreement)
     }
 
-    /// The voxel Dice `2 |M ∩ A| / (|M| + |A|)` (0 when both are empty).
-    pub fn voxel_dice(&self) -> f64 {
-        let count = self.foreground + self.model;
-        let both = self.foreground - self.missed.len();
-        match count {
-            0 => 0.0,
-            _ => 2.0 * both as f64 / count as f64,
+    /// Measures the boundary `model` against the surface `target` (any triangles: open or
+    /// closed): each triangle of either, at its centroid and weighing its area, with its exact
+    /// distance to the other surface. Errors: `InvalidMesh` for a surface without triangles.
+    pub fn of_surfaces(model: &TriMesh, target: &TriMesh) -> Result<Self> {
+        let (to_model, to_target) = (SurfaceDistance::new(model)?, SurfaceDistance::new(target)?);
+        let (missed, farthest) = triangle_distances(target, &to_model);
+        let edges: Vec<f64> = (target.triangles().iter())
+            .flat_map(|t| {
+                (0..3).map(|e| (target.points()[t[e]] - target.points()[t[(e + 1) % 3]]).norm())
+            })
+            .collect();
+        Ok(Self {
+            missed,
+            added: triangle_distances(model, &to_target).0,
+            target: areas(target).sum(),
+            model: areas(model).sum(),
+            farthest_missed: farthest,
+            step: edges.iter().sum::<f64>() / edges.len() as f64,
+            part: Part::Area,
+        })
+    }
+
+    /// The voxel Dice `2 |M ∩ A| / (|M| + |A|)` (0 when both are empty) of a disagreement of
+    /// voxels (none for surfaces).
+    pub fn voxel_dice(&self) -> Option<f64> {
+        let count = self.target + self.model;
+        let both = self.target - self.missed.len() as f64;
+        match (self.part, count > 0.0) {
+            (Part::Area, _) => None,
+            (Part::Voxels, false) => Some(0.0),
+            (Part::Voxels, true) => Some(2.0 * both / count),
         }
     }
 
-    /// The share of the foreground's voxels outside the model and farther than `reach` mm
-    /// from it (0 for an empty foreground).
+    /// The share of the target (its voxels, or its area) outside the model and farther than
+    /// `reach` mm from it (0 for an empty target).
     pub fn missed_beyond(&self, reach: f64) -> f64 {
-        share(&self.missed, reach, self.foreground)
+        share(&self.missed, reach, self.target)
     }
 
-    /// The model's voxels outside the foreground and farther than `reach` mm from it, as a
-    /// share of the foreground's voxels (0 for an empty foreground).
+    /// The part of the model outside the target and farther than `reach` mm from it, as a
+    /// share of the target (0 for an empty target).
     pub fn added_beyond(&self, reach: f64) -> f64 {
-        share(&self.added, reach, self.foreground)
+        share(&self.added, reach, self.target)
     }
 
     /// The reach of a model moved by a flow of kernel width `sigma` (mm): the larger of
-    /// [`MISS_REACH_VOXELS`] voxels of the grid's largest spacing and `sigma`, mm.
+    /// [`MISS_REACH_VOXELS`] sampling steps of the target (the grid's largest voxel spacing,
+    /// or the target surface's mean edge length) and `sigma`, mm.
     pub fn reach(&self, sigma: f64) -> f64 {
-        (MISS_REACH_VOXELS * self.voxel).max(sigma)
+        (MISS_REACH_VOXELS * self.step).max(sigma)
     }
 
     /// The part of the target that a model moved by a flow of kernel width `sigma` (mm)
@@ -179,9 +230,10 @@ impl Disagreement {
         let farthest = self.farthest_missed?;
         (share > MAX_MISSED_SHARE).then(|| Miss {
             share,
+            part: self.part,
             reach,
             farthest,
-            distance: self.missed.last().copied().unwrap_or_default(),
+            distance: self.missed.last().map_or(0.0, |m| m.0),
         })
     }
 }
@@ -242,14 +294,15 @@ impl Crop {
     }
 }
 
-/// The distances (mm, ascending) of the voxels in `a` and not in `b` to the nearest voxel of
-/// `b` (∞ for an empty `b`), and the index of the farthest (the first of equals).
+/// The distances (mm, ascending, each of weight 1) of the voxels in `a` and not in `b` to the
+/// nearest voxel of `b` (∞ for an empty `b`), and the index of the farthest (the first of
+/// equals).
 fn distances(
     a: &[bool],
     b: &[bool],
     dims: [usize; 3],
     spacing: [f64; 3],
-) -> Result<(Vec<f64>, Option<usize>)> {
+) -> Result<(Parts, Option<usize>)> {
     let outside_b: Vec<bool> = b.par_iter().map(|&v| !v).collect();
     let transform = FeatureTransform::new(&outside_b, dims, spacing)?;
     let apart: Vec<(usize, f64)> = (0..a.len())
@@ -264,17 +317,51 @@ fn distances(
             _ => Some((n, d)),
         })
         .map(|(n, _)| n);
-    let mut d: Vec<f64> = apart.into_iter().map(|(_, d)| d).collect();
-    d.sort_by(f64::total_cmp);
+    let mut d: Parts = apart.into_iter().map(|(_, d)| (d, 1.0)).collect();
+    d.sort_by(|a, b| a.0.total_cmp(&b.0));
     Ok((d, farthest))
 }
 
-/// The count of `sorted` above `reach`, over `of`.
-fn share(sorted: &[f64], reach: f64, of: usize) -> f64 {
-    let beyond = sorted.len() - sorted.partition_point(|&d| d <= reach);
-    match of {
-        0 => 0.0,
-        _ => beyond as f64 / of as f64,
+/// The areas of the triangles of `mesh`, mm².
+fn areas(mesh: &TriMesh) -> impl Iterator<Item = f64> + '_ {
+    let p = mesh.points();
+    (mesh.triangles().iter())
+        .map(move |t| 0.5 * (p[t[1]] - p[t[0]]).cross(&(p[t[2]] - p[t[0]])).norm())
+}
+
+/// The distances to `other` (mm, ascending) of the centroids of the triangles of `mesh`, each
+/// weighing its triangle's area, and the farthest centroid (the first of equals).
+fn triangle_distances(mesh: &TriMesh, other: &SurfaceDistance) -> (Parts, Option<Vec3>) {
+    let p = mesh.points();
+    let centroids: Vec<Vec3> = (mesh.triangles().iter())
+        .map(|t| (p[t[0]] + p[t[1]] + p[t[2]]) / 3.0)
+        .collect();
+    let mut d: Parts = (centroids.par_iter())
+        .map(|c| other.distance(c))
+        .zip(areas(mesh).collect::<Vec<_>>())
+        .collect();
+    let farthest = (d.iter().zip(&centroids))
+        .fold(
+            None,
+            |best: Option<(f64, Vec3)>, (&(dist, _), c)| match best {
+                Some((far, _)) if far >= dist => best,
+                _ => Some((dist, *c)),
+            },
+        )
+        .map(|(_, c)| c);
+    d.sort_by(|a, b| a.0.total_cmp(&b.0));
+    (d, farthest)
+}
+
+/// The weight of `sorted` (by distance) farther than `reach`, over `of` (0 for `of` = 0).
+fn share(sorted: &[(f64, f64)], reach: f64, of: f64) -> f64 {
+    // Summed from +0 (an empty `Sum` of floats is −0).
+    let beyond = sorted[sorted.partition_point(|&(d, _)| d <= reach)..]
+        .iter()
+        .fold(0.0, |sum, &(_, w)| sum + w);
+    match of > 0.0 {
+        true => beyond / of,
+        false => 0.0,
     }
 }
 
@@ -348,7 +435,7 @@ mod tests {
             let added = brute_distances(&model, &mask, &target);
             let count = mask.iter().filter(|&&v| v).count();
             let beyond = |d: &[f64], r: f64| d.iter().filter(|&&x| x > r).count() as f64;
-            prop_assert_eq!(d.voxel_dice(), voxel_dice(&mesh, &target).unwrap());
+            prop_assert_eq!(d.voxel_dice(), Some(voxel_dice(&mesh, &target).unwrap()));
             for r in [0.0, 0.2, 0.3, d.reach(0.1), 0.8] {
                 prop_assert!((d.missed_beyond(r) - beyond(&missed, r) / count as f64).abs() < 1e-12);
                 prop_assert!((d.added_beyond(r) - beyond(&added, r) / count as f64).abs() < 1e-12);
@@ -373,6 +460,34 @@ mod tests {
         }
     }
 
+    /// Two unit squares five apart as the target, one of them as the model: half the target's
+    /// area is missed, five away, and none of the model is added; the reach is two mean edges.
+    #[test]
+    fn a_surface_is_judged_by_its_area_and_its_mean_edge() {
+        let square = |z: f64| {
+            [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)].map(|(x, y)| Vec3::new(x, y, z))
+        };
+        let model = TriMesh::new(square(0.0).to_vec(), vec![[0, 1, 2], [0, 2, 3]]).unwrap();
+        let points = [square(0.0), square(5.0)].concat();
+        let target =
+            TriMesh::new(points, vec![[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]).unwrap();
+        let d = Disagreement::of_surfaces(&model, &target).unwrap();
+        assert_eq!(d.voxel_dice(), None);
+        let mean_edge = (2.0 + 2f64.sqrt()) / 3.0;
+        assert!((d.reach(0.1) - 2.0 * mean_edge).abs() < 1e-12);
+        assert_eq!(d.reach(7.0), 7.0);
+        assert!((d.missed_beyond(d.reach(0.1)) - 0.5).abs() < 1e-12);
+        assert_eq!(d.added_beyond(1e-9), 0.0);
+        let miss = d.miss(0.1).unwrap();
+        assert_eq!((miss.part, miss.farthest.z), (Part::Area, 5.0));
+        assert!((miss.distance - 5.0).abs() < 1e-12);
+        assert!(miss
+            .to_string()
+            .starts_with("50.0 % of the target's area lies outside"));
+        // A flow wider than the squares are apart reaches the second one.
+        assert!(d.miss(5.5).is_none());
+    }
+
     /// A model of nothing misses all of its target; a target of nothing is never missed.
     #[test]
     fn an_empty_model_or_target_is_measured_without_a_panic() {
@@ -380,13 +495,13 @@ mod tests {
         let (dims, grid) = crate::image::rasterize::grid_around(&mesh, 0.2, 0.4).unwrap();
         let empty = Volume::new(dims, vec![0.0; dims.iter().product()], grid).unwrap();
         let d = Disagreement::new(&mesh, &empty).unwrap();
-        assert_eq!((d.voxel_dice(), d.missed_beyond(0.0)), (0.0, 0.0));
+        assert_eq!((d.voxel_dice(), d.missed_beyond(0.0)), (Some(0.0), 0.0));
         assert!(d.miss(0.1).is_none());
         let far = octahedron_at(1.0, Vec3::new(100.0, 0.0, 0.0));
         let target = rasterize(&mesh, dims, grid).unwrap();
         let d = Disagreement::new(&far, &target).unwrap();
         let miss = d.miss(0.1).expect("nothing of the target is in the model");
-        assert_eq!((d.voxel_dice(), miss.share), (0.0, 1.0));
+        assert_eq!((d.voxel_dice(), miss.share), (Some(0.0), 1.0));
         assert_eq!(miss.distance, f64::INFINITY);
     }
 }
