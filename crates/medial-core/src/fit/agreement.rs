@@ -67,13 +67,13 @@ type Parts = Vec<(f64, f64)>;
 
 /// Where a model and its target differ, each part with its distance (mm) to the other and its
 /// weight: the voxels on which a rasterized model and a mask differ ([`Disagreement::new`]), or
-/// the triangles of a model's boundary and a target surface farther apart than nothing
-/// ([`Disagreement::of_surfaces`]); see the module documentation.
+/// the triangles of a model's boundary and of a target surface, each at its distance to the
+/// other surface ([`Disagreement::of_surfaces`]); see the module documentation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Disagreement {
-    /// The target's parts outside the model: (distance to the model, weight), by distance.
+    /// The target's parts outside the model (voxels; for surfaces every triangle), by distance.
     missed: Parts,
-    /// The model's parts outside the target: (distance to the target, weight), by distance.
+    /// The model's parts outside the target (voxels; for surfaces every triangle), by distance.
     added: Parts,
     /// The target's whole weight (voxels, or area in mm²).
     target: f64,
