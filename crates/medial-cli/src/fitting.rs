@@ -870,9 +870,9 @@ fn failure(
             )))
         }
         Status::MissesTarget => Some(CliError::MissesTarget(format!(
-            "stage '{}': the model misses its target: {}: check the start (alignment.txt, \
-             aligned_template.vtk) and that the template is of this structure; {written}\
-             misses_target\")",
+            "stage '{}': the model misses its target: {}: check where the fit started \
+             (aligned_template.vtk of a fit without a config, else the template) and that the \
+             template is of this structure; {written}misses_target\")",
             last.name,
             last.misses.as_deref().unwrap_or_default(),
         ))),

@@ -55,8 +55,8 @@ use crate::{Result, TriMesh, Vec3};
 /// everywhere has nothing beyond it (decision 0203).
 pub const MISS_REACH_VOXELS: f64 = 2.0;
 
-/// The largest share of the target's voxels that may lie outside the model beyond
-/// [`MISS_REACH_VOXELS`] before the fit is judged to have missed its target (decision 0203): a
+/// The largest share of the target that may lie outside the model beyond the reach
+/// ([`Disagreement::reach`]) before the fit is judged to have missed its target (decision 0203): a
 /// part of a few per cent of the structure is a part a reader of the result would see, and it
 /// lies about twice what the fits that met their targets leave there (at most 0.96 %) and half
 /// what the fits that ended in the wrong place or on another structure do (at least 4.9 %).
