@@ -56,10 +56,11 @@ use crate::{Result, TriMesh, Vec3};
 pub const MISS_REACH_VOXELS: f64 = 2.0;
 
 /// The largest share of the target that may lie outside the model beyond the reach
-/// ([`Disagreement::reach`]) before the fit is judged to have missed its target (decision 0203): a
-/// part of a few per cent of the structure is a part a reader of the result would see, and it
-/// lies about twice what the fits that met their targets leave there (at most 0.96 %) and half
-/// what the fits that ended in the wrong place or on another structure do (at least 4.9 %).
+/// ([`Disagreement::reach`]) before the fit is judged to have missed its target (decision
+/// 0203): a part of a few per cent of the structure is a part a reader of the result would see,
+/// and it lies about twice what the fits that met their targets leave there (at most 0.96 %)
+/// and half what the fits that ended in the wrong place or on another structure do (at least
+/// 4.9 %).
 pub const MAX_MISSED_SHARE: f64 = 0.02;
 
 /// Parts of a model or a target: (distance to the other, mm; weight), by distance.
