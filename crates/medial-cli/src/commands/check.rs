@@ -47,8 +47,8 @@ struct CheckReport {
     /// Whether the mean residual of the sheet atoms is within `max_residual_pct`.
     medial: bool,
     /// A fit folder: the `status` its summary.json gives (`converged`, `budget`,
-    /// `constraints_not_met`, `misses_target`, `unsound`, `interrupted`); a fit that `medial fit` did not end as
-    /// sound and within its tolerances fails the check whatever its balls.
+    /// `constraints_not_met`, `misses_target`, `unsound`, `interrupted`); a fit that `medial
+    /// fit` did not end as sound and within its tolerances fails the check whatever its balls.
     #[serde(skip_serializing_if = "Option::is_none")]
     fit_status: Option<String>,
 }

@@ -438,8 +438,9 @@ mod tests {
             let beyond = |d: &[f64], r: f64| d.iter().filter(|&&x| x > r).count() as f64;
             prop_assert_eq!(d.voxel_dice(), Some(voxel_dice(&mesh, &target).unwrap()));
             for r in [0.0, 0.2, 0.3, d.reach(0.1), 0.8] {
-                prop_assert!((d.missed_beyond(r) - beyond(&missed, r) / count as f64).abs() < 1e-12);
-                prop_assert!((d.added_beyond(r) - beyond(&added, r) / count as f64).abs() < 1e-12);
+                let n = count as f64;
+                prop_assert!((d.missed_beyond(r) - beyond(&missed, r) / n).abs() < 1e-12);
+                prop_assert!((d.added_beyond(r) - beyond(&added, r) / n).abs() < 1e-12);
             }
             prop_assert!((d.reach(0.1) - 2.0 * 0.26).abs() < 1e-12);
             prop_assert_eq!(d.reach(0.6), 0.6);
