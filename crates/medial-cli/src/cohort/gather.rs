@@ -133,8 +133,8 @@ enum RowStatus {
 #[derive(Serialize)]
 struct Row<'a> {
     subject: &'a str,
-    /// `converged`, `budget`, `constraints_not_met`, `misses_target`, `unsound`, `interrupted`, `failed` or
-    /// `pending`.
+    /// `converged`, `budget`, `constraints_not_met`, `misses_target`, `unsound`, `interrupted`,
+    /// `failed` or `pending`.
     status: RowStatus,
     /// Of a failed fit: what `medial fit` would have exited with.
     exit_code: Option<u8>,
@@ -142,8 +142,13 @@ struct Row<'a> {
     dice: Option<f64>,
     /// Voxel overlap of the rasterized model with the image (Dice stages).
     voxel_dice: Option<f64>,
+    /// The share of the target the model missed, % (Dice and varifold stages; above 2 % the
+    /// fit misses its target).
+    missed_pct: Option<f64>,
     /// Mean distance to the SSD targets, mm (SSD stages).
     mean_distance_mm: Option<f64>,
+    /// Mean distance of the model's boundary to the target surface, mm (varifold stages).
+    surface_distance_mm: Option<f64>,
     /// Largest spoke–normal angle at t = 1, degrees.
     max_spoke_normal_deg: Option<f64>,
     /// Largest spoke-length mismatch at t = 1, %.
@@ -173,7 +178,9 @@ impl<'a> Row<'a> {
             exit_code: s.failure.as_ref().map(|f| f.exit_code),
             dice: f.and_then(|f| f.dice),
             voxel_dice: f.and_then(|f| f.voxel_dice),
+            missed_pct: f.and_then(|f| f.missed_pct),
             mean_distance_mm: f.and_then(|f| f.mean_distance),
+            surface_distance_mm: f.and_then(|f| f.surface_distance),
             max_spoke_normal_deg: f.and_then(|f| f.max_spoke_normal_deg),
             max_spoke_mismatch_pct: f.and_then(|f| f.max_spoke_mismatch_pct),
             ball_residual_sheet_pct: ball.map(|b| b.mean_residual_pct),

@@ -208,6 +208,14 @@ fn a_batch_records_a_failure_goes_on_skips_on_a_rerun_and_gathers_the_thickness(
     assert_eq!(status, ["budget", "failed", "budget"], "{rows:?}");
     assert_eq!(rows[1]["exit_code"], "1");
     assert!(rows[0]["mean_distance_mm"].parse::<f64>().unwrap() > 0.0);
+    // Figures of other data terms are empty cells of their columns.
+    assert_eq!(
+        (
+            rows[0]["missed_pct"].as_str(),
+            rows[0]["surface_distance_mm"].as_str()
+        ),
+        ("", "")
+    );
     assert!(rows[0]["evaluations"].parse::<usize>().unwrap() > 0);
     assert_eq!(rows[0]["error"], "");
 
