@@ -43,9 +43,10 @@
 use rayon::prelude::*;
 
 use crate::image::distance::FeatureTransform;
-use crate::image::rasterize::rasterize;
+use crate::image::rasterize::rasterize_box;
 use crate::image::Volume;
 use crate::mesh::distance::SurfaceDistance;
+use crate::mesh::Bounds;
 use crate::{Result, TriMesh, Vec3};
 
 /// The least reach beyond which a voxel of the target outside the model is a part missed rather
@@ -138,13 +139,12 @@ impl std::fmt::Display for Miss {
 }
 
 impl Disagreement {
-    /// Rasterizes the closed mesh `mesh` on the grid of `mask` (see [`rasterize`]) and measures
-    /// it against the voxels of `mask` above ½. The distance transforms run on the box of the
-    /// voxels of either set (exact: every nearest voxel lies in it). Errors: those of
-    /// [`rasterize`] and of [`FeatureTransform::new`].
+    /// Rasterizes the closed mesh `mesh` on the grid of `mask` ([`rasterize_box`]) and measures
+    /// it against the voxels of `mask` above ½. Both the rasterization and the distance
+    /// transforms run on the box of the mesh's and the foreground's voxels, never on the whole
+    /// grid (exact: every nearest voxel lies in it). Errors: those of [`rasterize_box`] and of
+    /// [`FeatureTransform::new`].
     pub fn new(mesh: &TriMesh, mask: &Volume) -> Result<Self> {
-        let dims = mask.dims();
-        let model = rasterize(mesh, dims, *mask.voxel_to_world())?;
         let s = mask.spacing();
         let mut disagreement = Self {
             missed: Vec::new(),
@@ -155,10 +155,12 @@ impl Disagreement {
             step: s.max(),
             part: Part::Voxels,
         };
-        let Some(crop) = Crop::around(dims, model.data(), mask.data()) else {
+        let Some(crop) = Crop::around(mesh, mask) else {
             return Ok(disagreement);
         };
-        let (model, target) = (crop.cut(model.data()), crop.cut(mask.data()));
+        let grid = *mask.voxel_to_world();
+        let model = rasterize_box(mesh, mask.dims(), grid, crop.start, crop.dims)?;
+        let target = crop.cut(mask);
         let spacing = [s.x, s.y, s.z];
         let (missed, farthest) = distances(&target, &model, crop.dims, spacing)?;
         disagreement.missed = missed;
@@ -169,11 +171,13 @@ impl Disagreement {
         Ok(disagreement)
     }
 
-    /// Measures the boundary `model` against the surface `target` (any triangles: open or
-    /// closed): each triangle of either, at its centroid and weighing its area, with its exact
-    /// distance to the other surface. Errors: `InvalidMesh` for a surface without triangles.
-    pub fn of_surfaces(model: &TriMesh, target: &TriMesh) -> Result<Self> {
-        let (to_model, to_target) = (SurfaceDistance::new(model)?, SurfaceDistance::new(target)?);
+    /// Measures the boundary `model` against the surface `to_target` is prepared for (any
+    /// triangles: open or closed): each triangle of either, at its centroid and weighing its
+    /// area, with its exact distance to the other surface. Errors: `InvalidMesh` for a model
+    /// without triangles.
+    pub fn of_surfaces(model: &TriMesh, to_target: &SurfaceDistance) -> Result<Self> {
+        let target = to_target.surface();
+        let to_model = SurfaceDistance::new(model)?;
         let (missed, farthest) = triangle_distances(target, &to_model);
         let edges: Vec<f64> = (target.triangles().iter())
             .flat_map(|t| {
@@ -182,7 +186,7 @@ impl Disagreement {
             .collect();
         Ok(Self {
             missed,
-            added: triangle_distances(model, &to_target).0,
+            added: triangle_distances(model, to_target).0,
             target: areas(target).sum(),
             model: areas(model).sum(),
             farthest_missed: farthest,
@@ -239,8 +243,8 @@ impl Disagreement {
     }
 }
 
-/// The box of the voxels in either of two volumes, one voxel wider on each side where the grid
-/// allows.
+/// The box of a grid holding a mesh's voxels and a mask's foreground, one voxel wider on each
+/// side where the grid allows.
 struct Crop {
     /// The box's first voxel.
     start: [usize; 3],
@@ -251,20 +255,31 @@ struct Crop {
 }
 
 impl Crop {
-    /// The box around the voxels above ½ of `a` or `b` (none: both empty).
-    fn around(grid: [usize; 3], a: &[f64], b: &[f64]) -> Option<Self> {
+    /// The box around the voxels of `mask` above ½ and the part of the grid `mesh`'s bounding
+    /// box covers (none: neither has a voxel).
+    fn around(mesh: &TriMesh, mask: &Volume) -> Option<Self> {
+        let grid = mask.dims();
         let [nx, ny, _] = grid;
-        let (lo, hi) = (0..a.len())
-            .filter(|&n| a[n] > 0.5 || b[n] > 0.5)
-            .map(|n| [n % nx, (n / nx) % ny, n / (nx * ny)])
-            .fold(None, |acc: Option<([usize; 3], [usize; 3])>, v| {
-                Some(acc.map_or((v, v), |(lo, hi)| {
-                    (
-                        std::array::from_fn(|a| lo[a].min(v[a])),
-                        std::array::from_fn(|a| hi[a].max(v[a])),
-                    )
-                }))
-            })?;
+        let foreground = (mask.data().iter().enumerate())
+            .filter(|(_, &v)| v > 0.5)
+            .map(|(n, _)| [n % nx, (n / nx) % ny, n / (nx * ny)])
+            .map(|v| (v, v))
+            .reduce(hull);
+        let voxels: Vec<Vec3> = (mesh.points().iter())
+            .map(|p| mask.world_to_voxel().transform_point(&(*p).into()).coords)
+            .collect();
+        let on_grid = Bounds::of(&voxels).and_then(|b| {
+            let covers = (0..3).all(|a| b.max[a] >= 0.0 && b.min[a] <= (grid[a] - 1) as f64);
+            // Clamped to the grid before the casts (a mesh far off it has huge coordinates).
+            let at = |x: f64, a: usize| x.clamp(0.0, (grid[a] - 1) as f64) as usize;
+            covers.then(|| {
+                (
+                    std::array::from_fn(|a| at(b.min[a].floor(), a)),
+                    std::array::from_fn(|a| at(b.max[a].ceil(), a)),
+                )
+            })
+        });
+        let (lo, hi) = [foreground, on_grid].into_iter().flatten().reduce(hull)?;
         let start: [usize; 3] = std::array::from_fn(|a| lo[a].saturating_sub(1));
         let end: [usize; 3] = std::array::from_fn(|a| (hi[a] + 2).min(grid[a]));
         Some(Self {
@@ -274,10 +289,11 @@ impl Crop {
         })
     }
 
-    /// The voxels above ½ of `v` (on the whole grid) in the box, x fastest.
-    fn cut(&self, v: &[f64]) -> Vec<bool> {
+    /// The voxels of `mask` above ½ in the box, x fastest.
+    fn cut(&self, mask: &Volume) -> Vec<bool> {
         let [nx, ny, _] = self.grid;
         let [cx, cy, cz] = self.dims;
+        let v = mask.data();
         (0..cx * cy * cz)
             .into_par_iter()
             .map(|n| {
@@ -293,6 +309,14 @@ impl Crop {
         let local = [n % cx, (n / cx) % cy, n / (cx * cy)];
         std::array::from_fn(|a| self.start[a] + local[a])
     }
+}
+
+/// The smallest box holding two boxes of voxels, each `(lowest, highest)`.
+fn hull(a: ([usize; 3], [usize; 3]), b: ([usize; 3], [usize; 3])) -> ([usize; 3], [usize; 3]) {
+    (
+        std::array::from_fn(|i| a.0[i].min(b.0[i])),
+        std::array::from_fn(|i| a.1[i].max(b.1[i])),
+    )
 }
 
 /// The distances (mm, ascending, each of weight 1) of the voxels in `a` and not in `b` to the
@@ -369,7 +393,7 @@ fn share(sorted: &[(f64, f64)], reach: f64, of: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::image::rasterize::voxel_dice;
+    use crate::image::rasterize::{rasterize, voxel_dice};
     use crate::testing::meshes::octahedron;
     use nalgebra::Matrix4;
     use proptest::prelude::*;
@@ -473,7 +497,7 @@ mod tests {
         let points = [square(0.0), square(5.0)].concat();
         let target =
             TriMesh::new(points, vec![[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]]).unwrap();
-        let d = Disagreement::of_surfaces(&model, &target).unwrap();
+        let d = Disagreement::of_surfaces(&model, &SurfaceDistance::new(&target).unwrap()).unwrap();
         assert_eq!(d.voxel_dice(), None);
         let mean_edge = (2.0 + 2f64.sqrt()) / 3.0;
         assert!((d.reach(0.1) - 2.0 * mean_edge).abs() < 1e-12);

@@ -572,11 +572,7 @@ mod tests {
     fn an_unequal_scaling_is_found_after_the_similarity() {
         let target = stretched(Vec3::new(1.0, 2.0, -1.0), 1.0);
         let stretch = Matrix3::from_diagonal(&Vec3::new(1.25, 0.9, 1.0));
-        let target = TriMesh::new(
-            target.points().iter().map(|p| stretch * p).collect(),
-            target.triangles().to_vec(),
-        )
-        .unwrap();
+        let target = target.carried(&stretch.to_homogeneous());
         let (dims, grid) = grid_around(&target, 0.2, 2.0).unwrap();
         let mask = rasterize(&target, dims, grid).unwrap();
         let template = stretched(Vec3::zeros(), 1.0);
@@ -613,11 +609,7 @@ mod tests {
         );
         let map = Matrix3::from_diagonal(&Vec3::new(0.95, 0.85, 1.05)) * turn.matrix();
         let wall = slab(1.5);
-        let target = TriMesh::new(
-            wall.points().iter().map(|p| map * p).collect(),
-            wall.triangles().to_vec(),
-        )
-        .unwrap();
+        let target = wall.carried(&map.to_homogeneous());
         let (dims, grid) = grid_around(&target, 0.1, 1.0).unwrap();
         let mask = rasterize(&target, dims, grid).unwrap();
         let s = align_similarity(&wall, &mask).unwrap();

@@ -82,7 +82,7 @@ pub struct PreparedStage {
     pub mask: Option<Arc<Volume>>,
     /// Varifold stages: the target surface, to report the distance of the model's boundary to it
     /// and the part of it the model missed.
-    pub surface: Option<Arc<(TriMesh, SurfaceDistance)>>,
+    pub surface: Option<Arc<SurfaceDistance>>,
     /// Varifold stages: the kernel width in use, mm (given, or chosen from the target surface).
     pub varifold_width: Option<f64>,
     /// The medial constraints, when they apply.
@@ -177,7 +177,7 @@ impl PreparedStage {
             }
             (AttachmentSpec::Varifold(spec), Target::Surface(mesh)) => {
                 let varifold = varifold(spec, model, mesh)?;
-                surface = Some(Arc::new((mesh.clone(), SurfaceDistance::new(mesh)?)));
+                surface = Some(Arc::new(SurfaceDistance::new(mesh)?));
                 varifold_width = Some(varifold.width());
                 let weight = weight / varifold.target_norm2();
                 (Arc::new(varifold), weight)
@@ -270,9 +270,7 @@ impl PreparedStage {
         };
         match (&self.mask, model.medial(), &self.surface) {
             (Some(mask), Some(_), _) => Ok(Some(Disagreement::new(&boundary()?, mask)?)),
-            (None, _, Some(target)) => {
-                Ok(Some(Disagreement::of_surfaces(&boundary()?, &target.0)?))
-            }
+            (None, _, Some(target)) => Ok(Some(Disagreement::of_surfaces(&boundary()?, target)?)),
             _ => Ok(None),
         }
     }
@@ -282,7 +280,7 @@ impl PreparedStage {
     pub fn surface_distance(&self, model: &Model, q: &[Vec3]) -> Option<f64> {
         self.surface
             .as_ref()
-            .map(|s| s.1.mean_distance(&q[..model.boundary_count()]))
+            .map(|s| s.mean_distance(&q[..model.boundary_count()]))
     }
 
     /// SSD stages: the mean distance of the model's boundary at landmarks `q` to its targets, mm.

@@ -37,6 +37,43 @@ pub fn rasterize(mesh: &TriMesh, dims: [usize; 3], voxel_to_world: Matrix4<f64>)
     Volume::new(dims, data, voxel_to_world)
 }
 
+/// The voxels of the box of `size` voxels from voxel `start` of the grid `dims`,
+/// `voxel_to_world` whose centres lie inside the closed mesh `mesh` (x fastest): the very
+/// voxels [`rasterize`] marks there (the mesh is mapped to the whole grid's voxel coordinates
+/// alike), without writing out the whole grid. Errors: those of [`rasterize`]; a box past the
+/// grid is `InvalidParameter`.
+pub fn rasterize_box(
+    mesh: &TriMesh,
+    dims: [usize; 3],
+    voxel_to_world: Matrix4<f64>,
+    start: [usize; 3],
+    size: [usize; 3],
+) -> Result<Vec<bool>> {
+    if (0..3).any(|a| start[a] + size[a] > dims[a]) {
+        return Err(Error::InvalidParameter(format!(
+            "a box of {size:?} voxels from {start:?} is not within a grid of {dims:?}"
+        )));
+    }
+    let slices = Slices::of(mesh, dims, &voxel_to_world)?;
+    let [cx, cy, _] = size;
+    let mut inside = vec![false; size.iter().product()];
+    inside
+        .par_chunks_mut((cx * cy).max(1))
+        .enumerate()
+        .for_each(|(k, slab)| {
+            let rows = slices.crossings(start[2] + k);
+            for (row, crossings) in slab.chunks_mut(cx).zip(&rows[start[1]..start[1] + cy]) {
+                for run in inside_runs(crossings, dims[0]) {
+                    let (a, b) = (run.start.max(start[0]), run.end.min(start[0] + cx));
+                    if a < b {
+                        row[a - start[0]..b - start[0]].fill(true);
+                    }
+                }
+            }
+        });
+    Ok(inside)
+}
+
 /// The Dice coefficient `2 |M ∩ A| / (|M| + |A|)` between the voxels whose centres lie inside
 /// the closed mesh `mesh` (`M`, see [`rasterize`]) and the voxels of `mask` above ½ (`A`), on
 /// the grid of `mask`: the overlap a segmentation tool would report. 0 when both are empty.
@@ -399,6 +436,39 @@ mod tests {
     fn octahedron(c: Vec3, r: f64) -> TriMesh {
         let (points, triangles) = crate::testing::meshes::octahedron();
         TriMesh::new(points.iter().map(|p| c + r * p).collect(), triangles).unwrap()
+    }
+
+    /// A box of the grid holds the very voxels the whole grid's rasterization marks there,
+    /// centres on the octahedron's faces (lattice planes of the grid) included; a box past the
+    /// grid is refused.
+    #[test]
+    fn a_box_is_rasterized_as_the_whole_grid_is_there() {
+        let mesh = octahedron(Vec3::zeros(), 1.0);
+        let (dims, grid) = grid_around(&mesh, 0.1, 0.2).unwrap();
+        let whole = rasterize(&mesh, dims, grid).unwrap();
+        for (start, size) in [
+            ([0, 0, 0], dims),
+            ([3, 7, 11], [9, 4, 6]),
+            ([12, 0, 5], [1, 25, 1]),
+        ] {
+            let part = rasterize_box(&mesh, dims, grid, start, size).unwrap();
+            let [cx, cy, _] = size;
+            for (n, &inside) in part.iter().enumerate() {
+                let [i, j, k] = [
+                    n % cx + start[0],
+                    (n / cx) % cy + start[1],
+                    n / (cx * cy) + start[2],
+                ];
+                let at = whole.data()[i + dims[0] * (j + dims[1] * k)];
+                assert_eq!(
+                    inside,
+                    at > 0.5,
+                    "voxel {:?} of the box {start:?}, {size:?}",
+                    [i, j, k]
+                );
+            }
+        }
+        assert!(rasterize_box(&mesh, dims, grid, [1, 0, 0], dims).is_err());
     }
 
     #[test]

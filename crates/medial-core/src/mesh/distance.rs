@@ -10,6 +10,8 @@ use rayon::prelude::*;
 /// A triangle surface prepared for distance queries.
 pub struct SurfaceDistance {
     mesh: ParryMesh,
+    /// The surface as given.
+    surface: TriMesh,
 }
 
 impl SurfaceDistance {
@@ -24,7 +26,15 @@ impl SurfaceDistance {
             .collect();
         let mesh = ParryMesh::new(vertices, triangles)
             .map_err(|e| Error::InvalidMesh(format!("distance to a surface: {e}")))?;
-        Ok(Self { mesh })
+        Ok(Self {
+            mesh,
+            surface: surface.clone(),
+        })
+    }
+
+    /// The surface the distances are to.
+    pub fn surface(&self) -> &TriMesh {
+        &self.surface
     }
 
     /// `d(x, S)`: the distance (mm) from `x` to the nearest point of the surface.
