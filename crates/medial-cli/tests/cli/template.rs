@@ -298,20 +298,31 @@ fn a_failed_build_leaves_what_it_found_in_the_work_folder() {
     assert_eq!(label_set("Seam"), [-1, 0].into());
 }
 
-/// biv-me's template heart (a real two-ventricle myocardium, 1 mm): three sheets meeting along
-/// the RV insertion seam, built with default options into a sound template (decisions 0402,
-/// 0406, 0408), as given, moved by a fraction of a voxel (a stand-in for the same heart
-/// segmented on another grid: before decision 0408 that move found no seam) and turned by 24.4°
-/// (a heart scanned at an angle to the world axes, its voxels resampled). All three are built
-/// again from 600 atoms (decision 0409) for their Dice below the 0.95 target at 300: as given
-/// 0.920 once mended where it crossed itself after the fit (decision 0410), 0.943 from 600;
-/// moved, 0.930 from 300; turned, 0.934 from 600. Without decision 0413's rule (a lattice that
-/// turns past 90° laid again on its closed region) the turned heart's 600- and 1,200-atom
-/// sheets fold by 177–179° and its template stays at 300 atoms and 0.921 (a rotation drawn at
-/// random, never tuned on; its addendum). All under the 0.95 of [`assert_targets`]: guarded at
-/// the 0.93.
+/// biv-me's template heart (a real two-ventricle myocardium, 1 mm) as given: three sheets
+/// meeting along the RV insertion seam, built with default options into a sound template
+/// (decisions 0402, 0406, 0408), built again from 600 atoms (decision 0409) for its Dice below
+/// the 0.95 target at 300 (0.920 once mended where it crossed itself after the fit, decision
+/// 0410; 0.943 from 600). Under the 0.95 of [`assert_targets`]: guarded at the 0.93. The
+/// same heart on other grids: [`the_biv_me_heart_builds_wherever_its_voxels_fall`].
 #[test]
-fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam_wherever_its_voxels_fall() {
+fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam() {
+    let heart = data("bivme/template_myocardium.nii.gz");
+    let dir = tempfile::tempdir().unwrap();
+    assert_heart_template("as given", &heart, &dir.path().join("heart.vtk"));
+}
+
+/// The biv-me heart moved by a fraction of a voxel (a stand-in for the same heart segmented on
+/// another grid: before decision 0408 that move found no seam) and turned by 24.4° (a heart
+/// scanned at an angle to the world axes, its voxels resampled), each built as
+/// [`the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam`]: moved, 0.930 from 300 atoms;
+/// turned, 0.934 from 600. Without decision 0413's rule (a lattice that turns past 90° laid
+/// again on its closed region) the turned heart's 600- and 1,200-atom sheets fold by 177–179°
+/// and its template stays at 300 atoms and 0.921 (a rotation drawn at random, never tuned on;
+/// its addendum). Two builds of 1.5–3 minutes each: run with `--ignored` (decision 0200's
+/// addendum of 2026-12-08).
+#[test]
+#[ignore]
+fn the_biv_me_heart_builds_wherever_its_voxels_fall() {
     let dir = tempfile::tempdir().unwrap();
     let heart = data("bivme/template_myocardium.nii.gz");
     let mask = read_nifti(&heart).unwrap();
@@ -333,43 +344,43 @@ fn the_biv_me_heart_builds_as_three_sheets_meeting_at_a_seam_wherever_its_voxels
             translation(&centre) * turn.inverse().to_homogeneous() * translation(&-centre),
         ),
     ];
-    let shapes =
-        std::iter::once(("as given", heart.clone())).chain(cases.into_iter().enumerate().map(
-            |(k, (name, pad, motion))| {
-                let path = dir.path().join(format!("heart{}.nii.gz", k + 1));
-                write_nifti(&path, &resampled(&mask, pad, motion), NiftiType::U8).unwrap();
-                (name, path)
-            },
-        ));
-    for (k, (name, shape)) in shapes.enumerate() {
-        let out = dir.path().join(format!("heart{k}.vtk"));
-        let figures = run_json(&["template", s(&shape), "--out", s(&out), "-q"]);
-        let counts = (figures["sheets"].as_u64(), figures["seams"].as_u64());
-        assert_eq!(counts, (Some(3), Some(1)), "{name}: {figures}");
-        assert!(
-            figures["atoms_by_spokes"][2].as_u64().unwrap() >= 10,
-            "{name}: {figures}"
-        );
-        assert!(f(&figures["dice"]) >= 0.93, "{name}: {figures}");
-        let again = &figures["sampled_again"];
-        assert_ne!(
-            again["kept"], again["first"],
-            "{name}: built again and kept: {figures}"
-        );
-        assert!(again["not_kept"].is_array(), "{figures}");
-        assert!(figures["band_put_back"].is_array(), "{figures}");
-        assert!(figures["spokes_shortened"]["atoms"].is_array(), "{figures}");
-        assert!(
-            f(&figures["max_spoke_normal_deg"]) <= 0.1,
-            "{name}: {figures}"
-        );
-        assert!(
-            f(&figures["max_spoke_mismatch_pct"]) <= 0.1,
-            "{name}: {figures}"
-        );
-        for key in ["closed_manifold", "outward", "self_intersection_free"] {
-            assert_eq!(figures[key], Value::Bool(true), "{name}, {key}: {figures}");
-        }
+    for (k, (name, pad, motion)) in cases.into_iter().enumerate() {
+        let shape = dir.path().join(format!("heart{k}.nii.gz"));
+        write_nifti(&shape, &resampled(&mask, pad, motion), NiftiType::U8).unwrap();
+        assert_heart_template(name, &shape, &dir.path().join(format!("heart{k}.vtk")));
+    }
+}
+
+/// `medial template` of the heart `shape` with default options, written to `out`: three sheets
+/// and one seam, ten or more three-spoke atoms, built again at more atoms and kept, voxel Dice
+/// ≥ 0.93, ≤ 0.1° and ≤ 0.1 %, closed, manifold, outward and free of self-intersection.
+fn assert_heart_template(name: &str, shape: &Path, out: &Path) {
+    let figures = run_json(&["template", s(shape), "--out", s(out), "-q"]);
+    let counts = (figures["sheets"].as_u64(), figures["seams"].as_u64());
+    assert_eq!(counts, (Some(3), Some(1)), "{name}: {figures}");
+    assert!(
+        figures["atoms_by_spokes"][2].as_u64().unwrap() >= 10,
+        "{name}: {figures}"
+    );
+    assert!(f(&figures["dice"]) >= 0.93, "{name}: {figures}");
+    let again = &figures["sampled_again"];
+    assert_ne!(
+        again["kept"], again["first"],
+        "{name}: built again and kept: {figures}"
+    );
+    assert!(again["not_kept"].is_array(), "{figures}");
+    assert!(figures["band_put_back"].is_array(), "{figures}");
+    assert!(figures["spokes_shortened"]["atoms"].is_array(), "{figures}");
+    assert!(
+        f(&figures["max_spoke_normal_deg"]) <= 0.1,
+        "{name}: {figures}"
+    );
+    assert!(
+        f(&figures["max_spoke_mismatch_pct"]) <= 0.1,
+        "{name}: {figures}"
+    );
+    for key in ["closed_manifold", "outward", "self_intersection_free"] {
+        assert_eq!(figures[key], Value::Bool(true), "{name}, {key}: {figures}");
     }
 }
 
