@@ -144,13 +144,16 @@ pub struct Fingerprint {
 }
 
 impl Fingerprint {
-    /// The fingerprint of `config`: its settings and the files it reads.
-    pub fn of(config: &Config) -> Result<Self, CliError> {
+    /// The fingerprint of `config`: its settings and the files it reads. `start`: the bytes
+    /// of an automatic fit's start, the template its config names in the output folder, where
+    /// the set writes it only at the end (they stand for that file's).
+    pub fn of(config: &Config, start: Option<&[u8]>) -> Result<Self, CliError> {
         let mut settings = config.clone();
-        let mut inputs = vec![(
-            "the template".to_string(),
-            digest_of(&settings.model.template)?,
-        )];
+        let template = match start {
+            Some(bytes) => Sha256::digest(bytes).into(),
+            None => digest_of(&settings.model.template)?,
+        };
+        let mut inputs = vec![("the template".to_string(), template)];
         settings.model.template = PathBuf::new();
         for stage in &mut settings.stages {
             let name = stage.name.clone();

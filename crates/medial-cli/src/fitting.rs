@@ -14,6 +14,7 @@ use crate::signals::{Signal, Signals};
 use crate::stage::{self, flow_of};
 use crate::summary::{Figures, StageSummary, Status, Summary};
 use crate::time_points::{self, time_points};
+use medial_core::fit::agreement::Miss;
 use medial_core::fit::plan;
 use medial_core::fit::{
     run_stages_resumable, Checkpoint, FitEvent, FitRun, PlannedStage, PreparedStage, StageOutcome,
@@ -93,6 +94,9 @@ pub struct Start {
     pub notes: Vec<String>,
     /// The trials that chose the start (in summary.json as `start_trials`).
     pub trials: Vec<medial_core::fit::trial::StartTrial>,
+    /// The other starts, best first: the fit runs again from the next where it misses its
+    /// target ([`run`]).
+    pub others: Vec<medial_core::fit::trial::Candidate>,
     /// The stage the trials prepared against the fit's one target: its image is not read and
     /// smoothed again ([`stage::prepare_all`]).
     pub prepared: Option<PreparedStage>,
@@ -177,6 +181,7 @@ fn automatic(inputs: &Inputs, out: &Path) -> Result<Resolved, CliError> {
             given: model,
             notes: start.notes,
             trials: start.trials,
+            others: start.others,
             prepared: start.prepared,
         }),
     })
@@ -237,18 +242,21 @@ const ALIGNED_TEMPLATE: &str = "aligned_template.vtk";
 /// The template an automatic fit was given, as read (`medial apply` carries its space).
 const GIVEN_TEMPLATE: &str = "template.vtk";
 
-/// An automatic fit's start belongs to its set: the aligned template and the initial map.
-fn write_start(set: &mut ResultSet, start: &Start) -> Result<(), CliError> {
-    medial_io::affine::write_affine(&set.file(ALIGNMENT)?, &start.alignment)?;
-    for (name, model) in [
-        (ALIGNED_TEMPLATE, &start.model),
-        (GIVEN_TEMPLATE, &start.given),
-    ] {
-        let path = set.file(name)?;
-        match model {
-            Model::Medial(t) => medial_io::cmrep::write_template(&path, t, write_options(false))?,
-            Model::Plain(mesh) => vtk::write_trimesh(&path, mesh, write_options(false))?,
-        }
+/// An automatic fit's start belongs to its set: the template it started from (`start`, as
+/// [`Taken::bytes`]), the initial map and the template as given.
+fn write_start(
+    set: &mut ResultSet,
+    start: &Taken,
+    alignment: Matrix4<f64>,
+    given: &Model,
+) -> Result<(), CliError> {
+    medial_io::affine::write_affine(&set.file(ALIGNMENT)?, &alignment)?;
+    let path = set.file(ALIGNED_TEMPLATE)?;
+    std::fs::write(&path, start.bytes()).map_err(|e| CliError::io(&path, e))?;
+    let path = set.file(GIVEN_TEMPLATE)?;
+    match given {
+        Model::Medial(t) => medial_io::cmrep::write_template(&path, t, write_options(false))?,
+        Model::Plain(mesh) => vtk::write_trimesh(&path, mesh, write_options(false))?,
     }
     Ok(())
 }
@@ -277,13 +285,31 @@ bits.\n";
 /// that ends at an unsound iterate, or with its constraints above their tolerance, writes its
 /// results (marked in `summary.json`'s `status`) and then returns the error that says so; so
 /// does a fit stopped by SIGINT or SIGTERM, which also writes its checkpoint.
+///
+/// An automatic fit recovers before it reports a failure: one that ends unsound runs again from
+/// its start with safer settings ([`plan::safer`]); one that misses a part of its target
+/// ([`medial_core::fit::agreement`]) runs again from the next start its trials ranked
+/// ([`medial_core::fit::trial::Choice::others`]), and where none meets the target the run that
+/// missed least is written. `summary.json`'s `retries` says what ran again and why.
 pub fn run(resolved: &Resolved, options: &FitOptions) -> Result<Summary, CliError> {
-    let model = match &resolved.start {
-        Some(start) => start.model.clone(),
-        None => medial_io::model::read_model(&resolved.config.model.template)?,
+    let mut start = match &resolved.start {
+        Some(start) => Taken {
+            model: start.model.clone(),
+            alignment: Some(start.alignment),
+        },
+        None => Taken {
+            model: medial_io::model::read_model(&resolved.config.model.template)?,
+            alignment: None,
+        },
     };
+    let mut next_starts = resolved.start.iter().flat_map(|s| &s.others);
     let mut config = resolved.config.clone();
     let mut retries = Vec::new();
+    // Runs with safer settings from the start in use.
+    let mut safer_runs = 0;
+    // The run of an automatic fit that missed its target least, while others are tried.
+    let mut least_missed: Option<(f64, Run, Ended)> = None;
+    // The result set, begun before the first run writes its log (after its inputs were read).
     let mut set = None;
     // Stages prepared before, with their sources: the trials' first stage for the first run,
     // each run's stages for the retry after it.
@@ -292,63 +318,153 @@ pub fn run(resolved: &Resolved, options: &FitOptions) -> Result<Summary, CliErro
         None => Vec::new(),
     };
     loop {
-        let flow = flow_of(&config, model.landmarks().len())?;
-        let prepared = stage::prepare_all(&config, &model, &earlier)?;
+        let flow = flow_of(&config, start.model.landmarks().len())?;
+        let prepared = stage::prepare_all(&config, &start.model, &earlier)?;
         earlier = stage::by_source(&config, &prepared);
-        let with_choices = stage::with_choices(&config, &prepared);
-        let engine = medial_core::fit::run::Fit::new(model.clone(), flow, prepared);
-        let planned = engine.planned();
-        let fit = Fit {
-            config: &with_choices,
-            options,
-            model: engine.model(),
-            flow: engine.flow(),
-            prepared: engine.stages(),
-            planned: &planned,
-            alignment: resolved.start.as_ref().map_or(&[], |s| &s.notes),
-            start_trials: resolved.start.as_ref().map_or(&[], |s| &s.trials),
-            retries: &retries,
+        let run = Run {
+            config: stage::with_choices(&config, &prepared),
+            engine: medial_core::fit::run::Fit::new(start.model.clone(), flow, prepared),
+            start,
         };
-        let (resumed, fingerprint) = if options.resume {
-            let fingerprint = Fingerprint::of(&with_choices)?;
-            let path = options.out.join(checkpoint::FILE);
-            (
-                Some(Saved::read_for(&path, &fingerprint)?),
-                Some(fingerprint),
+        let (ended, miss) = run.with_fit(resolved, options, &retries, |fit| {
+            let fingerprint = match options.resume {
+                true => Some(fit.fingerprint()?),
+                false => None,
+            };
+            let resumed = match &fingerprint {
+                Some(f) => Some(Saved::read_for(&options.out.join(checkpoint::FILE), f)?),
+                None => None,
+            };
+            if set.is_none() {
+                set = Some(ResultSet::begin(&options.out)?);
+            }
+            let ended = fit.optimise(resumed, fingerprint)?;
+            let miss = fit.miss(&ended)?;
+            Ok((ended, miss))
+        })?;
+        // Whether an automatic fit runs again (a fit from a config runs as it was written).
+        let automatic = resolved.start.is_some() && !options.resume;
+        let unsound = ended.unsound_cause();
+        let safer = match &unsound {
+            Some(cause) if automatic => plan::safer(
+                &run.config.spec(),
+                run.start.model.landmarks(),
+                safer_runs + 1,
             )
-        } else {
-            (None, None)
-        };
-        if set.is_none() {
-            let mut begun = ResultSet::begin(&options.out)?;
-            if let Some(start) = &resolved.start {
-                write_start(&mut begun, start)?;
-            }
-            set = Some(begun);
-        }
-        let ended = fit.optimise(resumed, fingerprint)?;
-        // An automatic fit that ends unsound runs again from its start with safer settings
-        // (the engine's rule); a fit from a config runs as it was written.
-        let retry = match (&resolved.start, ended.unsound_cause()) {
-            (Some(_), Some(cause)) if !options.resume => {
-                plan::safer(&with_choices.spec(), model.landmarks(), retries.len() + 1)
-                    .map(|safer| (cause, safer))
-            }
+            .map(|safer| (cause, safer)),
             _ => None,
         };
-        if let Some((cause, safer)) = retry {
+        if let Some((cause, safer)) = safer {
             let line = format!("the fit ended unsound ({cause}); {}", safer.why);
             tracing::info!("{line}");
             retries.push(line);
-            config = with_choices.with_spec(&safer.spec)?;
+            safer_runs += 1;
+            config = run.config.with_spec(&safer.spec)?;
+            start = run.start;
             continue;
         }
+        // A run from another start that ends unsound counts as missing everything: the earlier
+        // run that missed part of the target is kept over it.
+        let failed = match (&miss, unsound) {
+            (Some(miss), _) if automatic => (miss.share, format!("misses its target ({miss})")),
+            (None, Some(cause)) if least_missed.is_some() => {
+                (f64::INFINITY, format!("ended unsound ({cause})"))
+            }
+            _ => return run.write(ended, set, resolved, options, &retries),
+        };
+        let kept = match least_missed.take() {
+            Some(kept) if kept.0 <= failed.0 => kept,
+            _ => (failed.0, run, ended),
+        };
+        let Some(next) = next_starts.next() else {
+            let (_, run, ended) = kept;
+            return run.write(ended, set, resolved, options, &retries);
+        };
+        let line = format!(
+            "the fit {}; runs again from the start {}, the next by its trial",
+            failed.1, next.name
+        );
+        tracing::info!("{line}");
+        retries.push(line);
+        least_missed = Some(kept);
+        start = Taken {
+            model: next.model.clone(),
+            alignment: Some(next.alignment),
+        };
+        config = resolved.config.clone();
+        safer_runs = 0;
+    }
+}
+
+/// The start a run of a fit took: its model, and an automatic fit's initial map (template →
+/// subject).
+struct Taken {
+    model: Model,
+    alignment: Option<Matrix4<f64>>,
+}
+
+impl Taken {
+    /// The start as its set writes it (`aligned_template.vtk`).
+    fn bytes(&self) -> Vec<u8> {
+        let data = match &self.model {
+            Model::Medial(t) => medial_io::cmrep::template_to_polydata(t),
+            Model::Plain(mesh) => vtk::PolyData::from_trimesh(mesh),
+        };
+        vtk::polydata_to_bytes(&data, write_options(false))
+    }
+}
+
+/// One run of a fit: its config with the choices its stages made, the engine and its start.
+struct Run {
+    config: Config,
+    engine: medial_core::fit::run::Fit,
+    start: Taken,
+}
+
+impl Run {
+    /// `f` of the [`Fit`] of this run.
+    fn with_fit<R>(
+        &self,
+        resolved: &Resolved,
+        options: &FitOptions,
+        retries: &[String],
+        f: impl FnOnce(&Fit<'_>) -> Result<R, CliError>,
+    ) -> Result<R, CliError> {
+        let planned = self.engine.planned();
+        let start = resolved.start.as_ref();
+        f(&Fit {
+            config: &self.config,
+            options,
+            model: self.engine.model(),
+            flow: self.engine.flow(),
+            prepared: self.engine.stages(),
+            planned: &planned,
+            start: self.start.alignment.map(|_| &self.start),
+            alignment: start.map_or(&[], |s| &s.notes),
+            start_trials: start.map_or(&[], |s| &s.trials),
+            retries,
+        })
+    }
+
+    /// Writes this run's results, as it `ended`, as the fit's set, begun as `set` (an
+    /// automatic fit's start with them).
+    fn write(
+        self,
+        ended: Ended,
+        set: Option<ResultSet>,
+        resolved: &Resolved,
+        options: &FitOptions,
+        retries: &[String],
+    ) -> Result<Summary, CliError> {
         let mut set = set.expect("begun before the first run");
+        if let (Some(given), Some(alignment)) = (&resolved.start, self.start.alignment) {
+            write_start(&mut set, &self.start, alignment, &given.given)?;
+        }
         write_text(
             &set.file("config.toml")?,
-            &with_choices.to_toml(RESOLVED_HEADER)?,
+            &self.config.to_toml(RESOLVED_HEADER)?,
         )?;
-        return fit.write_set(set, ended);
+        self.with_fit(resolved, options, retries, |fit| fit.write_set(set, ended))
     }
 }
 
@@ -361,6 +477,8 @@ struct Fit<'a> {
     flow: &'a Flow,
     prepared: &'a [PreparedStage],
     planned: &'a [PlannedStage<'a>],
+    /// An automatic fit's start for this run (its set writes it at the end).
+    start: Option<&'a Taken>,
     /// An automatic fit's alignment notes ([`Start::notes`]).
     alignment: &'a [String],
     /// An automatic fit's start trials ([`Start::trials`]).
@@ -543,7 +661,7 @@ impl Fit<'_> {
             };
             let fingerprint = match &fingerprint {
                 Some(f) => f.clone(),
-                None => fingerprint.insert(Fingerprint::of(self.config)?).clone(),
+                None => fingerprint.insert(self.fingerprint()?).clone(),
             };
             let saved = watch.saved(fingerprint, checkpoint);
             if let Some(signal) = signals.received() {
@@ -552,6 +670,24 @@ impl Fit<'_> {
             saved.write(&out.join(checkpoint::FILE))?;
             from = Some(saved.fit);
         }
+    }
+
+    /// The fingerprint of this fit's checkpoints: its config's, where an automatic fit's start
+    /// is the template in memory (its file is written with the set, at the end).
+    fn fingerprint(&self) -> Result<Fingerprint, CliError> {
+        Fingerprint::of(self.config, self.start.map(Taken::bytes).as_deref())
+    }
+
+    /// The part of its target the fit missed (at the end of its last stage), where it ran to its
+    /// end, sound, and missed one ([`stage::end_figures`]).
+    fn miss(&self, ended: &Ended) -> Result<Option<Miss>, CliError> {
+        let last = match (&ended.interrupted, ended.outcomes.last()) {
+            (None, Some(last)) if last.unsound.is_none() => last,
+            _ => return Ok(None),
+        };
+        let stage = &self.prepared[ended.outcomes.len() - 1];
+        let sigma = self.flow.kernel().sigma();
+        Ok(stage::end_figures(stage, self.model, &last.evaluation, sigma)?.1)
     }
 
     /// Writes the results of `ended` as one set and moves it into the result folder; returns

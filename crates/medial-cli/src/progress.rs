@@ -6,6 +6,7 @@ use crate::results::ResultSet;
 use crate::summary::Figures;
 use std::io::{BufWriter, IsTerminal, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 /// One row of `log.csv`.
@@ -45,11 +46,16 @@ pub struct Log {
 const LOG_HEADER: &str = "stage,al_iteration,iteration,evaluations,mu,total,kinetic,data,penalty,max_abs_constraint,max_spoke_normal_deg,max_spoke_mismatch_pct,grad_norm,seconds,dice,time_steps";
 
 impl Log {
-    /// Starts `path` (as [`part_name`] beside it) with `earlier`, the log of a checkpoint up
+    /// Starts `path` (as [`part_name`] beside it, numbered) with `earlier`, the log of a checkpoint up
     /// to it, or with the header when `earlier` is empty.
     pub fn create(path: &Path, earlier: &str) -> Result<Self, CliError> {
+        // Numbered: a fit run again from another start keeps an earlier run's log open (the
+        // run it may write) beside the new one's.
+        static LOGS: AtomicUsize = AtomicUsize::new(0);
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned());
-        let part = path.with_file_name(part_name(&name.unwrap_or_default()));
+        let number = LOGS.fetch_add(1, Ordering::Relaxed);
+        let part =
+            path.with_file_name(part_name(&format!("{number}-{}", name.unwrap_or_default())));
         let file = std::fs::File::options()
             .write(true)
             .create_new(true)

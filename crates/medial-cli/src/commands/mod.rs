@@ -61,8 +61,10 @@ pub enum Command {
         out: Option<PathBuf>,
         /// Continue the fit stopped in DIR (by SIGINT, SIGTERM or a kill after a periodic
         /// checkpoint) from DIR/checkpoint.bin, writing into DIR; it ends with the same bits as
-        /// a fit never stopped. Without CONFIG.toml, DIR/config.toml is the config. Refused
-        /// when the config or an input file differs from the stopped fit's.
+        /// a fit never stopped. Without CONFIG.toml, DIR/config.toml is the config; a fit
+        /// started without one resumes with the flags it was started with (--template and its
+        /// target: a kill before its first results leaves no config.toml). Refused when the
+        /// config or an input file differs from the stopped fit's.
         #[arg(long, value_name = "DIR")]
         resume: Option<PathBuf>,
         /// Also write DIR/checkpoint.bin every SECONDS of wall-clock time (after the iteration
@@ -191,7 +193,12 @@ pub fn run(command: Command, threads: usize, quiet: bool) -> Result<(), CliError
                         .map(|c| c.parent().unwrap_or(Path::new(".")).join("out"))
                 })
                 .expect("clap requires --out without a config or --resume");
-            let config = config.or_else(|| resume.as_ref().map(|dir| dir.join("config.toml")));
+            // A fit without a config resumes as it started: automatic, from the flags.
+            let config = config.or_else(|| {
+                (resume.as_ref())
+                    .filter(|_| inputs.template.is_none())
+                    .map(|dir| dir.join("config.toml"))
+            });
             let resolved = crate::fitting::resolve(config.as_deref(), &inputs, &out)?;
             let summary = crate::fitting::run(
                 &resolved,

@@ -101,7 +101,7 @@ fn fit(args: &[&str]) {
     assert!(o.status.success(), "fit {args:?}: {}", text(&o.stderr));
 }
 
-/// The running fit's log in `dir`, `.medial-<pid>-log.csv.part` (its `log.csv` as it goes).
+/// The running fit's log in `dir`, `.medial-<pid>-<n>-log.csv.part` (its `log.csv` as it goes).
 fn log_part(dir: &Path) -> Option<PathBuf> {
     std::fs::read_dir(dir)
         .ok()?
@@ -553,4 +553,33 @@ fn a_resume_with_another_config_or_input_is_refused() {
     std::fs::copy(toy("affine.txt"), &moved).unwrap();
     fit(&[s(&edited), "--resume", s(&out)]);
     base.assert_same(&out);
+}
+
+/// An automatic fit (no config) killed after a periodic checkpoint, before it wrote any result:
+/// its folder holds the checkpoint alone, no `config.toml`, and its start (the aligned template)
+/// exists only in memory. Resumed with the flags it was started with, it chooses the same start
+/// and ends with the bytes of the fit never stopped. (Before, the first periodic checkpoint of
+/// such a fit failed: its fingerprint read the aligned template from a folder that had none.)
+#[test]
+fn an_automatic_fit_killed_after_a_checkpoint_resumes_from_its_flags_to_the_same_bits() {
+    let dir = tempfile::tempdir().unwrap();
+    let (template, image) = (toy("template.vtk"), toy("target.nii.gz"));
+    let flags = ["--template", s(&template), "--image", s(&image)];
+    let whole = dir.path().join("whole");
+    fit(&[&flags[..], &["--out", s(&whole)]].concat());
+    let out = dir.path().join("out");
+    let checkpoint = out.join("checkpoint.bin");
+    let args = [&flags[..], &["--out", s(&out), "--checkpoint-every", "0.2"]].concat();
+    let o = signal_when(spawn(&args), "KILL", || {
+        checkpoint.exists() && rows(&out) >= 40
+    });
+    assert_eq!(o.status.code(), None, "killed");
+    assert!(!out.join("config.toml").exists() && !out.join("summary.json").exists());
+    fit(&[&flags[..], &["--resume", s(&out)]].concat());
+    complete_set(&out);
+    assert!(!checkpoint.exists(), "a completed fit leaves no checkpoint");
+    for file in ["momenta.npy", "aligned_template.vtk", "fitted_template.vtk"] {
+        let read = |d: &Path| std::fs::read(d.join(file)).unwrap();
+        assert!(read(&out) == read(&whole), "{file} differs");
+    }
 }

@@ -297,6 +297,10 @@ pub struct AutomaticStart {
     /// The trials that chose the start among several candidates ([`choose`]); empty when
     /// there was one.
     pub trials: Vec<StartTrial>,
+    /// The other starts, best first ([`crate::fit::trial::Choice::others`]): where the fit from
+    /// this start misses a part of its target ([`crate::fit::agreement`]), a wrong start is the
+    /// likely cause, and the next of these the one to try.
+    pub others: Vec<Candidate>,
     /// The stage the trials prepared against the target
     /// ([`crate::fit::trial::Choice::prepared`]): a stage of the fit with the same data
     /// settings takes its data from it.
@@ -329,7 +333,7 @@ impl AutomaticStart {
 /// truncation changes their objectives by at most the kernel's tolerance).
 pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<AutomaticStart> {
     let mut spec = plan::automatic(model, target)?;
-    let (mut trials, mut prepared) = (Vec::new(), None);
+    let (mut trials, mut prepared, mut others) = (Vec::new(), None, Vec::new());
     let (alignment, start): (InitialAlignment, Model) = match model {
         Model::Medial(template) => {
             let boundary = template.boundary_mesh()?;
@@ -360,7 +364,7 @@ pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<
             };
             let choice = choose(candidates, &spec, target, mask.as_ref(), memory)?;
             alignment.notes.extend(describe(&choice.trials));
-            (trials, prepared) = (choice.trials, choice.prepared);
+            (trials, prepared, others) = (choice.trials, choice.prepared, choice.others);
             alignment.matrix = choice.taken.alignment;
             (alignment, choice.taken.model)
         }
@@ -378,6 +382,7 @@ pub fn automatic(model: &Model, target: &Target, memory: MemoryLimit) -> Result<
         alignment: alignment.matrix,
         notes: alignment.notes,
         trials,
+        others,
         prepared,
     })
 }

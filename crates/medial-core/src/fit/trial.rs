@@ -206,6 +206,12 @@ fn run_trial(
 pub struct Choice {
     /// The candidate taken.
     pub taken: Candidate,
+    /// The other candidates, the order in which to try them where a fit from the one taken
+    /// misses a part of its target ([`crate::fit::run::AutomaticStart::others`]): those whose
+    /// trial was sound by their trials' objectives (lowest first; the order of preference on a
+    /// tie), then those whose trial ended unsound in the order of preference. A candidate
+    /// whose boundary does not overlap the foreground is not among them.
+    pub others: Vec<Candidate>,
     /// The trials that chose it; empty when there was one candidate.
     pub trials: Vec<StartTrial>,
     /// The trials' stage as they prepared it against the target (none without trials, or when
@@ -232,6 +238,7 @@ pub fn choose(
             .ok_or_else(|| Error::InvalidParameter("no candidate start to choose from".into()))?;
         return Ok(Choice {
             taken: first,
+            others: Vec::new(),
             trials: Vec::new(),
             prepared: None,
         });
@@ -247,18 +254,30 @@ pub fn choose(
             Ok(trial)
         })
         .collect::<Result<Vec<_>>>()?;
-    let best = trials
-        .iter()
-        .enumerate()
+    // The sound trials by objective; a stable sort keeps the order of preference on a tie.
+    let mut ranked: Vec<(usize, f64)> = (trials.iter().enumerate())
         .filter_map(|(i, t)| t.objective.map(|e| (i, e)))
-        .fold(None, |best: Option<(usize, f64)>, (i, e)| match best {
-            Some((_, b)) if b <= e => best,
-            _ => Some((i, e)),
-        })
-        .map_or(0, |(i, _)| i);
+        .collect();
+    ranked.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let best = ranked.first().map_or(0, |&(i, _)| i);
     trials[best].taken = true;
+    let mut candidates: Vec<Option<Candidate>> = candidates.into_iter().map(Some).collect();
+    let taken = candidates[best]
+        .take()
+        .expect("each candidate is taken once");
+    let sound: Vec<Candidate> = (ranked.iter())
+        .filter_map(|&(i, _)| candidates[i].take())
+        .collect();
+    // Then those whose trial ended unsound, in the order of preference: a trial runs with the
+    // fit's first settings, and a fold there is what the fit's own retries with safer settings
+    // are for ([`crate::fit::plan::safer`]); only a start without overlap is never tried.
+    let unsound = (candidates.into_iter().zip(&trials))
+        .filter(|(_, t)| t.voxel_dice_start != Some(0.0))
+        .filter_map(|(c, _)| c);
+    let others = sound.into_iter().chain(unsound).collect();
     Ok(Choice {
-        taken: candidates.swap_remove(best),
+        taken,
+        others,
         trials,
         prepared: shared.and_then(|fit| fit.into_stages().pop()),
     })
@@ -378,6 +397,7 @@ mod tests {
         ];
         let Choice {
             taken,
+            others,
             trials,
             prepared,
         } = choose(
@@ -425,6 +445,15 @@ mod tests {
         };
         assert_eq!(taken.name, lowest.start);
         assert!(lowest.taken);
+        // The other sound start is the one to try next, then the one whose trial could not
+        // run; never the start that does not overlap the foreground.
+        let other = if lowest.start == thin.start {
+            wall
+        } else {
+            thin
+        };
+        let names: Vec<&str> = others.iter().map(|c| c.name.as_str()).collect();
+        assert_eq!(names, [other.start.as_str(), "plain"]);
         assert_eq!(trials.iter().filter(|t| t.taken).count(), 1, "{trials:?}");
         let line = describe(&trials).unwrap();
         assert!(
@@ -459,8 +488,8 @@ mod tests {
         assert_eq!(objectives(&reversed), objectives(&trials));
     }
 
-    /// Equal trials: the first candidate (the preferred one) is taken; one candidate is taken
-    /// without a trial.
+    /// Equal trials: the first candidate (the preferred one) is taken, the second is next; one
+    /// candidate is taken without a trial and leaves none to try next.
     #[test]
     fn a_tie_goes_to_the_first_and_one_candidate_needs_no_trial() {
         let target = target();
@@ -469,7 +498,12 @@ mod tests {
         let same = || medial("same", sheet(0.6, Vec3::zeros()));
         let mut second = same();
         second.name = "second".into();
-        let Choice { taken, trials, .. } = choose(
+        let Choice {
+            taken,
+            others,
+            trials,
+            ..
+        } = choose(
             vec![same(), second],
             &spec,
             &target,
@@ -479,9 +513,15 @@ mod tests {
         .unwrap();
         assert_eq!(taken.name, "same");
         assert_eq!(trials[0].objective, trials[1].objective);
-        let Choice { taken, trials, .. } =
-            choose(vec![same()], &spec, &target, None, MemoryLimit::none()).unwrap();
+        assert_eq!(others.len(), 1);
+        assert_eq!(others[0].name, "second");
+        let Choice {
+            taken,
+            others,
+            trials,
+            ..
+        } = choose(vec![same()], &spec, &target, None, MemoryLimit::none()).unwrap();
         assert_eq!(taken.name, "same");
-        assert!(trials.is_empty() && describe(&trials).is_none());
+        assert!(trials.is_empty() && describe(&trials).is_none() && others.is_empty());
     }
 }
