@@ -216,6 +216,12 @@ pub fn run(args: &TemplateArgs) -> Result<(), CliError> {
             again.why,
         );
     }
+    if built.figures.denoised.is_some() {
+        tracing::warn!(
+            "the segmentation as given gave no sound template; it was built from the \
+             segmentation smoothed by half a voxel, its noise taken out (`denoised` says why)"
+        );
+    }
     let put_back = &built.figures.band_put_back;
     if !put_back.is_empty() {
         tracing::info!(

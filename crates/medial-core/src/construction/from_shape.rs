@@ -58,14 +58,14 @@ const VOXELS_PER_RADIUS: f64 = 3.0;
 const THIN_PERCENTILE: f64 = 0.10;
 /// Grid margin around the shape, voxels.
 pub const MARGIN_VOXELS: f64 = 3.0;
-/// The Gaussian (in voxels of the segmentation) a mask is smoothed with before it is sampled on
-/// the fine grid: a segmentation's boundary is known to about a voxel, and a voxel flipped alone
-/// on it (noise) would otherwise become a bump of the fine grid's boundary and a branch of its
-/// medial axis. At ½ voxel (the kernel sampled on the voxels: 0.79 at the centre, 0.11 at
-/// either neighbour) a voxel alone (peak 0.49) is gone after the cut at ½, one alone on a flat
-/// face is a smaller bump, the face stays where it was, and a wall one voxel thick stays
+/// The Gaussian (in voxels of the segmentation) a mask is smoothed with when its sheet as given
+/// gives no sound template ([`Shape::denoised`]): a segmentation's boundary is known to about a
+/// voxel, and a voxel flipped alone on it (noise) is a bump of the fine grid's boundary and a
+/// branch of its medial axis. At ½ voxel (the kernel sampled on the voxels: 0.79 at the centre,
+/// 0.11 at either neighbour) a voxel alone (peak 0.49) is gone after the cut at ½, one alone on
+/// a flat face is a smaller bump, the face stays where it was, and a wall one voxel thick stays
 /// (0.84 voxel wide).
-const NOISE_SCALE: f64 = 0.5;
+pub const NOISE_SCALE: f64 = 0.5;
 /// Voxels along the longest side of a mesh's first, coarse grid.
 const COARSE_VOXELS: f64 = 96.0;
 /// The Dice of a template against its shape that counts as matching it.
@@ -131,13 +131,9 @@ impl Shape {
         match self {
             Self::Mesh(mesh) => rasterize(mesh, dims, to_world),
             Self::Mask(mask, graded) => {
-                let smoothed;
-                let (image, cut): (&Volume, f64) = match graded {
+                let (image, cut) = match graded {
                     Some(graded) => (graded, 0.0),
-                    None => {
-                        smoothed = mask.smoothed(NOISE_SCALE * mask.spacing().min())?;
-                        (&smoothed, 0.5)
-                    }
+                    None => (mask, 0.5),
                 };
                 image.resampled(dims, to_world).and_then(|v| {
                     let data = v.data().iter().map(|&x| f64::from(u8::from(x > cut)));
@@ -145,6 +141,20 @@ impl Shape {
                 })
             }
         }
+    }
+
+    /// A binary segmentation's shape with its noise taken out: the mask smoothed by a Gaussian
+    /// of [`NOISE_SCALE`] of its smallest voxel, cut at ½ on the fine grid (the mask itself
+    /// kept for the bounds and the Dice on its own grid). `None` for a graded image or a mesh,
+    /// which carry their own sub-voxel boundary.
+    pub fn denoised(&self) -> Result<Option<Self>> {
+        let Self::Mask(mask, None) = self else {
+            return Ok(None);
+        };
+        let smoothed = mask.smoothed(NOISE_SCALE * mask.spacing().min())?;
+        let level = smoothed.data().iter().map(|v| v - 0.5).collect();
+        let graded = Volume::new(mask.dims(), level, *mask.voxel_to_world())?;
+        Ok(Some(Self::Mask(mask.clone(), Some(Box::new(graded)))))
     }
 
     /// The bounding box of the shape (the mask's foreground voxels, or the mesh's points).
@@ -262,6 +272,10 @@ pub struct TemplateFigures {
     /// asked for gave a template unsound or below [`TARGET_DICE`]), which sampling was kept,
     /// and why the others were not; `None` when it was not built again.
     pub sampled_again: Option<SampledAgain>,
+    /// Why the template was built from the segmentation with its noise taken out
+    /// ([`Shape::denoised`]): the build from it as given gave no sound template, for this
+    /// reason; `None` when it was built from the shape as given.
+    pub denoised: Option<String>,
     /// The template's summary.
     pub summary: TemplateSummary,
 }
@@ -373,6 +387,34 @@ pub enum BuildStep<'a> {
 /// [`template_of_shape`], calling `watch` at each [`BuildStep`] as it is taken (before the
 /// steps after it, which may fail): `medial template --work` writes them.
 pub fn template_of_shape_watched(
+    shape: &Shape,
+    options: &TemplateOptions,
+    memory: MemoryLimit,
+    watch: &mut dyn FnMut(BuildStep<'_>),
+) -> Result<BuiltTemplate> {
+    let built = built_from(shape, options, memory, watch);
+    // A segmentation whose sheet gives no sound template at any sampling is built again with
+    // its noise taken out: flipped voxels fold a sheet that the shape itself does not.
+    let Err(Error::InvalidTemplate(why)) = &built else {
+        return built;
+    };
+    let Some(denoised) = shape.denoised()? else {
+        return built;
+    };
+    match built_from(&denoised, options, memory, watch) {
+        Ok(mut again) if again.figures.verdict().is_ok() => {
+            again.figures.denoised = Some(why.clone());
+            Ok(again)
+        }
+        _ => Err(Error::InvalidTemplate(format!(
+            "{why}; built again from the segmentation smoothed by {NOISE_SCALE} voxel (its \
+             noise taken out), none was sound either"
+        ))),
+    }
+}
+
+/// [`template_of_shape_watched`] of the shape as it is.
+fn built_from(
     shape: &Shape,
     options: &TemplateOptions,
     memory: MemoryLimit,
@@ -1038,6 +1080,7 @@ fn figures_of(
         spokes_shortened: SpokesShortened::default(),
         band_put_back: Vec::new(),
         sampled_again: None,
+        denoised: None,
         summary,
     })
 }
@@ -1126,9 +1169,9 @@ mod tests {
         spec.check().unwrap();
     }
 
-    /// A segmentation's mask is smoothed by [`NOISE_SCALE`] voxels before it is sampled on the
-    /// fine grid: a voxel alone beside the shape (noise) is gone, a wall one voxel thick stays
-    /// (thinner by under a fine voxel), and a flat boundary stays where it was.
+    /// A segmentation with its noise taken out ([`Shape::denoised`]) on the fine grid: a voxel
+    /// alone beside the shape (there as given) is gone, a wall one voxel thick stays (thinner by
+    /// under a fine voxel), and a flat boundary stays where it was.
     #[test]
     fn a_lone_voxel_is_gone_and_a_one_voxel_wall_and_a_flat_boundary_stay() {
         let dims = [24, 24, 24];
@@ -1145,7 +1188,19 @@ mod tests {
             .collect();
         let mask = Volume::new(dims, data, nalgebra::Matrix4::identity()).unwrap();
         let shape = Shape::of_segmentation(&mask, None);
-        let fine = shape.on_grid(0.25, MemoryLimit::none()).unwrap();
+        let plain = shape.on_grid(0.25, MemoryLimit::none()).unwrap();
+        let fine = (shape.denoised().unwrap().unwrap())
+            .on_grid(0.25, MemoryLimit::none())
+            .unwrap();
+        assert_eq!(plain.dims(), fine.dims(), "the same grid");
+        let lone = plain
+            .world_to_voxel()
+            .transform_point(&nalgebra::Point3::new(12.0, 12.0, 10.0));
+        let [i, j, k] = [lone.x, lone.y, lone.z].map(|c| c.round() as usize);
+        assert_eq!(
+            plain.data()[i + plain.dims()[0] * (j + plain.dims()[1] * k)],
+            1.0
+        );
         let inside = |x: f64, y: f64, z: f64| {
             let v = fine
                 .world_to_voxel()
@@ -1252,6 +1307,7 @@ mod tests {
             spokes_shortened: SpokesShortened::default(),
             band_put_back: Vec::new(),
             sampled_again: None,
+            denoised: None,
             summary: TemplateSummary::default(),
         }
     }
