@@ -479,7 +479,10 @@ mod tests {
                         (target.voxel_centre([n % nx, (n / nx) % ny, n / (nx * ny)]) - m.farthest)
                             .norm() < 1e-9
                     }).collect();
-                    prop_assert_eq!(brute_distances(&far, &model, &target), vec![farthest]);
+                    // The voxel named is at the farthest distance (another voxel may tie with
+                    // it to the last bit of rounding).
+                    let at = brute_distances(&far, &model, &target);
+                    prop_assert!(at.len() == 1 && (at[0] - farthest).abs() < 1e-12, "{at:?}");
                 }
                 None => prop_assert!(share <= MAX_MISSED_SHARE),
             }
