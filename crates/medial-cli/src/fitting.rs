@@ -242,8 +242,8 @@ const ALIGNED_TEMPLATE: &str = "aligned_template.vtk";
 /// The template an automatic fit was given, as read (`medial apply` carries its space).
 const GIVEN_TEMPLATE: &str = "template.vtk";
 
-/// An automatic fit's start belongs to its set: the template it started from (`start`, as
-/// [`Taken::bytes`]), the initial map and the template as given.
+/// An automatic fit's start belongs to its set: the template it started from (`start`, the
+/// bytes of [`Taken::bytes`]), the initial map and the template as given.
 fn write_start(
     set: &mut ResultSet,
     start: &Taken,
@@ -251,12 +251,9 @@ fn write_start(
     given: &Model,
 ) -> Result<(), CliError> {
     medial_io::affine::write_affine(&set.file(ALIGNMENT)?, &alignment)?;
-    let path = set.file(ALIGNED_TEMPLATE)?;
-    std::fs::write(&path, start.bytes()).map_err(|e| CliError::io(&path, e))?;
-    let path = set.file(GIVEN_TEMPLATE)?;
-    match given {
-        Model::Medial(t) => medial_io::cmrep::write_template(&path, t, write_options(false))?,
-        Model::Plain(mesh) => vtk::write_trimesh(&path, mesh, write_options(false))?,
+    for (name, model) in [(ALIGNED_TEMPLATE, &start.model), (GIVEN_TEMPLATE, given)] {
+        let data = medial_io::model::model_polydata(model);
+        vtk::write_polydata(&set.file(name)?, &data, write_options(false))?;
     }
     Ok(())
 }
@@ -326,6 +323,8 @@ pub fn run(resolved: &Resolved, options: &FitOptions) -> Result<Summary, CliErro
             engine: medial_core::fit::run::Fit::new(start.model.clone(), flow, prepared),
             start,
         };
+        // Whether an automatic fit runs again (a fit from a config runs as it was written).
+        let automatic = resolved.start.is_some() && !options.resume;
         let (ended, miss) = run.with_fit(resolved, options, &retries, |fit| {
             let fingerprint = match options.resume {
                 true => Some(fit.fingerprint()?),
@@ -339,11 +338,13 @@ pub fn run(resolved: &Resolved, options: &FitOptions) -> Result<Summary, CliErro
                 set = Some(ResultSet::begin(&options.out)?);
             }
             let ended = fit.optimise(resumed, fingerprint)?;
-            let miss = fit.miss(&ended)?;
+            // Judged again when the set is written; here only where it decides a retry.
+            let miss = match automatic {
+                true => fit.miss(&ended)?,
+                false => None,
+            };
             Ok((ended, miss))
         })?;
-        // Whether an automatic fit runs again (a fit from a config runs as it was written).
-        let automatic = resolved.start.is_some() && !options.resume;
         let unsound = ended.unsound_cause();
         let safer = match &unsound {
             Some(cause) if automatic => plan::safer(
@@ -366,7 +367,7 @@ pub fn run(resolved: &Resolved, options: &FitOptions) -> Result<Summary, CliErro
         // A run from another start that ends unsound counts as missing everything: the earlier
         // run that missed part of the target is kept over it.
         let failed = match (&miss, unsound) {
-            (Some(miss), _) if automatic => (miss.share, format!("misses its target ({miss})")),
+            (Some(miss), _) => (miss.share, format!("misses its target ({miss})")),
             (None, Some(cause)) if least_missed.is_some() => {
                 (f64::INFINITY, format!("ended unsound ({cause})"))
             }
@@ -404,12 +405,9 @@ struct Taken {
 }
 
 impl Taken {
-    /// The start as its set writes it (`aligned_template.vtk`).
+    /// The start's bytes as its set writes them (`aligned_template.vtk`, [`write_start`]).
     fn bytes(&self) -> Vec<u8> {
-        let data = match &self.model {
-            Model::Medial(t) => medial_io::cmrep::template_to_polydata(t),
-            Model::Plain(mesh) => vtk::PolyData::from_trimesh(mesh),
-        };
+        let data = medial_io::model::model_polydata(&self.model);
         vtk::polydata_to_bytes(&data, write_options(false))
     }
 }

@@ -46,8 +46,8 @@ pub struct Log {
 const LOG_HEADER: &str = "stage,al_iteration,iteration,evaluations,mu,total,kinetic,data,penalty,max_abs_constraint,max_spoke_normal_deg,max_spoke_mismatch_pct,grad_norm,seconds,dice,time_steps";
 
 impl Log {
-    /// Starts `path` (as [`part_name`] beside it, numbered) with `earlier`, the log of a checkpoint up
-    /// to it, or with the header when `earlier` is empty.
+    /// Starts `path` (as [`part_name`] beside it, numbered) with `earlier`, the log of a
+    /// checkpoint up to it, or with the header when `earlier` is empty.
     pub fn create(path: &Path, earlier: &str) -> Result<Self, CliError> {
         // Numbered: a fit run again from another start keeps an earlier run's log open (the
         // run it may write) beside the new one's.

@@ -26,6 +26,15 @@ pub fn read_model(path: &Path) -> Result<Model> {
     Ok(Model::Plain(mesh))
 }
 
+/// The model as its template file holds it, the inverse of [`read_model`]: a medial template as
+/// cmrep polydata ([`crate::cmrep::template_to_polydata`]), a plain mesh as its triangles.
+pub fn model_polydata(model: &Model) -> PolyData {
+    match model {
+        Model::Medial(t) => crate::cmrep::template_to_polydata(t),
+        Model::Plain(mesh) => PolyData::from_trimesh(mesh),
+    }
+}
+
 /// The boundary at landmarks `q`; for a medial template with the point arrays
 /// `SpokeNormalAngle` (degrees), `SpokeMismatch` (%), `Radius` (spoke length, mm) and
 /// `MedialIndex`. A point set is written as vertices.

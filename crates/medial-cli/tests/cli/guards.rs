@@ -249,9 +249,11 @@ fn assert_misses(flag: &str, target: &Path, out: &Path, what: &str, past_x: f64)
         .parse()
         .unwrap();
     assert!(at > past_x, "{at} {past_x}: {err}");
-    // An automatic fit that misses runs again from each other start its trials judged (none
-    // for a surface, whose starts are not tried), and keeps the run that missed least.
-    let starts = summary["start_trials"].as_array().map_or(0, Vec::len);
+    // An automatic fit that misses runs again from each other start whose trial ran (none for
+    // a surface, whose starts are not tried), and keeps the run that missed least.
+    let starts = (summary["start_trials"].as_array().into_iter().flatten())
+        .filter(|t| f(&t["evaluations"]) > 0.0)
+        .count();
     let retries = summary["retries"].as_array().unwrap();
     let again: Vec<&str> = (retries.iter().filter_map(Value::as_str))
         .filter(|r| r.contains("misses its target") && r.contains("runs again from the start"))

@@ -395,22 +395,39 @@ pub fn template_of_shape_watched(
     let built = built_from(shape, options, memory, watch);
     // A segmentation whose sheet gives no sound template at any sampling is built again with
     // its noise taken out: flipped voxels fold a sheet that the shape itself does not.
-    let Err(Error::InvalidTemplate(why)) = &built else {
-        return built;
+    let why = match &built {
+        Err(Error::InvalidTemplate(e)) => e.clone(),
+        Ok(b) if unsound(b) => b
+            .figures
+            .verdict()
+            .err()
+            .map(|v| v.to_string())
+            .unwrap_or_default(),
+        _ => return built,
     };
     let Some(denoised) = shape.denoised()? else {
         return built;
     };
     match built_from(&denoised, options, memory, watch) {
-        Ok(mut again) if again.figures.verdict().is_ok() => {
-            again.figures.denoised = Some(why.clone());
+        Ok(mut again) if !unsound(&again) => {
+            again.figures.denoised = Some(why);
             Ok(again)
         }
-        _ => Err(Error::InvalidTemplate(format!(
-            "{why}; built again from the segmentation smoothed by {NOISE_SCALE} voxel (its \
-             noise taken out), none was sound either"
-        ))),
+        Ok(_) | Err(Error::InvalidTemplate(_)) => match built {
+            Err(_) => Err(Error::InvalidTemplate(format!(
+                "{why}; built again from the segmentation smoothed by {NOISE_SCALE} voxel (its \
+                 noise taken out), none was sound either"
+            ))),
+            ok => ok,
+        },
+        Err(e) => Err(e),
     }
+}
+
+/// Whether `built` is unsound (its boundary not a closed outward manifold free of
+/// self-intersection): a template the finer samplings and the denoised build are for.
+fn unsound(built: &BuiltTemplate) -> bool {
+    matches!(built.figures.verdict(), Err(Verdict::Unsound(_)))
 }
 
 /// [`template_of_shape_watched`] of the shape as it is.

@@ -209,8 +209,9 @@ pub struct Choice {
     /// The other candidates, the order in which to try them where a fit from the one taken
     /// misses a part of its target ([`crate::fit::run::AutomaticStart::others`]): those whose
     /// trial was sound by their trials' objectives (lowest first; the order of preference on a
-    /// tie), then those whose trial ended unsound in the order of preference. A candidate
-    /// whose boundary does not overlap the foreground is not among them.
+    /// tie), then those whose trial ran and ended unsound, in the order of preference. A
+    /// candidate whose trial could not run (no overlap with the foreground, a model the stage
+    /// refuses) is not among them.
     pub others: Vec<Candidate>,
     /// The trials that chose it; empty when there was one candidate.
     pub trials: Vec<StartTrial>,
@@ -268,11 +269,12 @@ pub fn choose(
     let sound: Vec<Candidate> = (ranked.iter())
         .filter_map(|&(i, _)| candidates[i].take())
         .collect();
-    // Then those whose trial ended unsound, in the order of preference: a trial runs with the
-    // fit's first settings, and a fold there is what the fit's own retries with safer settings
-    // are for ([`crate::fit::plan::safer`]); only a start without overlap is never tried.
+    // Then those whose trial ran and ended unsound, in the order of preference: a trial runs
+    // with the fit's first settings, and a fold there is what the fit's own retries with safer
+    // settings are for ([`crate::fit::plan::safer`]). A start whose trial could not run (no
+    // overlap, a model the stage refuses) is never tried.
     let unsound = (candidates.into_iter().zip(&trials))
-        .filter(|(_, t)| t.voxel_dice_start != Some(0.0))
+        .filter(|(_, t)| t.evaluations > 0)
         .filter_map(|(c, _)| c);
     let others = sound.into_iter().chain(unsound).collect();
     Ok(Choice {
@@ -445,15 +447,15 @@ mod tests {
         };
         assert_eq!(taken.name, lowest.start);
         assert!(lowest.taken);
-        // The other sound start is the one to try next, then the one whose trial could not
-        // run; never the start that does not overlap the foreground.
+        // The other sound start is the one to try next; never one whose trial could not run
+        // (the start off the foreground, the plain mesh a Dice stage refuses).
         let other = if lowest.start == thin.start {
             wall
         } else {
             thin
         };
         let names: Vec<&str> = others.iter().map(|c| c.name.as_str()).collect();
-        assert_eq!(names, [other.start.as_str(), "plain"]);
+        assert_eq!(names, [other.start.as_str()]);
         assert_eq!(trials.iter().filter(|t| t.taken).count(), 1, "{trials:?}");
         let line = describe(&trials).unwrap();
         assert!(
